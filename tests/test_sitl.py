@@ -25,7 +25,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.cli import main
 from bridge.loop import simulate
-from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT
+from bridge.mavlink.endpoint import CONTROLLER_SYSID, GCS_PORT, LINK_PORT
 from bridge.mavlink.telemetry import StatusTextJoiner
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.halves import count_records, read_half
@@ -35,7 +35,16 @@ from bridge.session import instance_slot, sitl
 from bridge.session.children import CHOSEN_PORTS_LOW, PORT_LOCKS, RECENT_PORTS, ephemeral_low, free_udp_port
 from missions import MISSION_DIR, Mission, Sine, load_mission
 from tests.plans import OUTSIDE_WHY, battery_mission, outside_fence_plan
-from tests.sitlkit import ENV, ROOT, Bsst, child_pids, run_bsst, stall_blackouts, unexplained_outages
+from tests.sitlkit import (
+    ENV,
+    ROOT,
+    Bsst,
+    child_pids,
+    run_bsst,
+    stall_blackouts,
+    tlog_messages,
+    unexplained_outages,
+)
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -280,6 +289,52 @@ def test_controller_sigkill_means_failsafe_landing_exit_1(tmp_path):
     left = events["lockstep"]
     assert summary["lockstep"]["held"] is False and summary["lockstep"]["left_at_s"] == left["t"] < t_fs
     _policies_hold(summary)
+
+
+SINE_8S = 'name = "long"\nduration_s = 8.0\n[trajectory]\nkind = "sine"\n'  # the user's tour's mission
+
+
+@pytest.mark.parametrize("side", ["vehicle", "controller"])
+def test_a_real_time_child_killed_leaves_link_counts_that_add_up_and_says_the_flight_was_cut_short(tmp_path, side):
+    """A real-time session's vehicle or controller SIGKILLed a second into an 8 s mission leaves no stats report:
+    each direction of the link is counted from both tlogs up to the dead side's cut, said so (``counted``), and adds
+    up (sent = delivered + lost, none negative; delivered: the per-step messages both tlogs hold, read here with
+    pymavlink), and the header gives the time flown beside the mission's 8 s. Until the third wave's forty-second
+    session one side's counts stood in for the missing other's: a vehicle killed read ``up: sent 561 delivered 0
+    lost 561``, ``down: sent 0 delivered 567 lost -567``, a controller killed ``up: sent 436 delivered 457 lost
+    -21``, under ``duration 2.23 s`` alone."""
+    mission = tmp_path / "long.toml"
+    mission.write_text(SINE_8S)
+    run = tmp_path / "run"
+    with instance_slot() as n:
+        p = _bsst_sitl(n, mission, run, "--realtime")
+        try:
+            wait_for(lambda: count_records(run / "vehicle.bin") > 250 or p.poll() is not None, 60,
+                     "a second of flight")
+            os.kill(child_pids(run)[side], signal.SIGKILL)
+            out, err = p.communicate(timeout=60)
+        finally:
+            if p.poll() is None:
+                p.kill()
+    assert p.returncode == 1 and f"{side} (pid " in err and "killed by SIGKILL" in err, err
+    s = json.loads((run / "summary.json").read_text())
+    assert s["sitl"]["died"] == side and s["outcome"] == ("aborted" if side == "vehicle" else "failsafe"), s
+    sysid = s["sitl"]["sysid"]
+    for d, sender, receiver, src, kinds in (
+            ("up", "controller", "vehicle", CONTROLLER_SYSID, ["SET_ACTUATOR_CONTROL_TARGET", "HIL_ACTUATOR_CONTROLS"]),
+            ("down", "vehicle", "controller", sysid, "ODOMETRY")):
+        link = s["link"][d]
+        sent = {bytes(m.get_msgbuf()) for m in tlog_messages(run / f"{sender}.tlog", src, kinds)}
+        both = sent & {bytes(m.get_msgbuf()) for m in tlog_messages(run / f"{receiver}.tlog", src, kinds)}
+        assert link["delivered"] == len(both) > 200 and link["lost"] >= 0, (d, link)
+        assert link["sent"] == link["delivered"] + link["lost"] <= len(sent), (d, link, len(sent))
+        assert link["counted"].startswith(f"the {side} ended without its stats (killed by SIGKILL): each "), link
+        assert f"link {d:4}: sent {link['sent']} delivered {link['delivered']} lost {link['lost']} " in out, out
+        assert f"link {d:4}: counted: {link['counted']}" in out, out
+    # the time flown, and the mission's length beside it: summary.json's duration_s is the time flown (as offline)
+    flown = s["duration_s"]
+    assert flown == s["timing"]["sim_s"] < 7.0 and s["mission_duration_s"] == 8.0, s["timing"]
+    assert f"duration {flown:.2f} s of the mission's 8 s (cut short)" in out.splitlines()[0], out
 
 
 def test_ctrl_c_stops_everything_within_2_s(tmp_path):

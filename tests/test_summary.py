@@ -1,5 +1,5 @@
-"""Covers bridge.record.summary, bridge.record.events, bridge.record.columns and bridge.mavlink.receive: a session's
-summary.json built from hand-made inputs (and the sender's count of its states, StepSends), without processes.
+"""Covers bridge.record and bridge.mavlink.receive: a session's summary.json (bridge.record's summary, linkblock, events
+and columns) built from hand-made inputs (and the sender's count of its states, StepSends), without processes.
 
 Each case is what a session could see (the joined trace, each child's end, the events); the summary's
 outcome, ``ended_by``, ``link``, ``timing``, ``lockstep`` and policy blocks are checked against it.
@@ -14,6 +14,7 @@ from dataclasses import replace
 import pytest
 
 from bridge.autopilot.vehicleevents import ITSELF, ParamChanged, Sender
+from bridge.cli.runreport import link_lines
 from bridge.core.flight import prepare
 from bridge.mavlink.receive import StepSends
 from bridge.record.columns import (
@@ -27,16 +28,15 @@ from bridge.record.columns import (
 )
 from bridge.record.events import RunEvent, in_time_order
 from bridge.record.joiner import Joined
+from bridge.record.linkblock import Cut, link_block, steps_outside
 from bridge.record.policies import POLICIES, run_ok
 from bridge.record.summary import (
     ChildEnd,
     SessionFacts,
     controller_completed,
-    link_block,
     outcome_of,
     session_summary,
     stalls_block,
-    steps_outside,
     timing_block,
 )
 from missions import Mission, Sine
@@ -163,6 +163,21 @@ def test_the_link_block_through_a_relay_and_without_statistics() -> None:
                           "refused": 0, "in_flight": 0, "shed": 0, "dropped_by_kernel": 0, "kernel_counts": False,
                           "delay_ms": {"p50": 0.1, "p95": 0.1, "p99": 0.1, "max": 0.1}}
     assert bare["down"]["sent"] == 45 and bare["down"]["lost"] == 5
+
+
+def test_a_side_killed_without_tlogs_leaves_its_links_counts_unknown_and_says_why() -> None:
+    """A vehicle killed (no stats) in a run with no readable pair of tlogs: neither direction can be counted, so
+    both are null and ``unknown`` says why, printed as ``n/a`` (until the third wave's forty-second session the
+    controller's counts stood alone: ``down: sent 0 delivered 40 lost -40``)."""
+    cut = Cut("vehicle", "killed by SIGKILL", None)
+    link = link_block(joined(40), {}, {**CONTROLLER_STATS, "down": None}, None, cut)  # real time: no model
+    for d in ("up", "down"):
+        assert {k: link[d][k] for k in ("sent", "delivered", "lost")} == dict.fromkeys(("sent", "delivered", "lost"))
+        assert link[d]["unknown"].startswith("the vehicle ended without its stats (killed by SIGKILL) and the run "
+                                             "holds no readable vehicle.tlog and controller.tlog"), link[d]
+    lines = link_lines(link)
+    assert lines[0].startswith("link up  : sent n/a delivered n/a lost n/a dup n/a reordered n/a"), lines
+    assert lines[1] == f"link up  : unknown: {link['up']['unknown']}\n", lines
 
 
 def test_the_timing_block() -> None:

@@ -154,7 +154,7 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     out = stream or sys.stdout
     w = out.write
     w(f"mission {s['mission']}  controller {s['controller']}  profile {s['profile']}  "
-      f"clock {s['clock']}  rate {s['rate_hz']:g} Hz  duration {s['duration_s']:.2f} s\n")
+      f"clock {s['clock']}  rate {s['rate_hz']:g} Hz  duration {duration_text(s)}\n")
     w(f"outcome: {s['outcome']}\n")
     end = s.get("ended_by")
     if end and (end.get("who"), end.get("how")) != ("mission", "completed"):
@@ -197,6 +197,15 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
         w(f"run directory: {path}\n")
 
 
+def duration_text(s: dict[str, Any]) -> str:
+    """The header's duration: the mission's time flown (``duration_s``), and the mission's own length beside it
+    when the flight was cut short (a child killed at 2.2 s of 8 s read ``duration 2.23 s`` alone until the third
+    wave's forty-second session)."""
+    flown, asked = s["duration_s"], s.get("mission_duration_s")
+    short = asked is not None and flown < asked - 0.5 / s["rate_hz"]
+    return f"{flown:.2f} s" + (f" of the mission's {asked:g} s (cut short)" if short else "")
+
+
 def link_lines(link: dict[str, Any]) -> list[str]:
     """A run's link as its printed summary says it: each direction's counts and delays when the link model did
     anything (lost, duplicated, reordered, held, delayed), and each jitter it capped (docs/links.md)."""
@@ -204,16 +213,20 @@ def link_lines(link: dict[str, Any]) -> list[str]:
 
     lines = []
     if any(L.get("lost") or L.get("duplicated") or L.get("reordered") or L.get("in_flight")  # (held: a delay)
-           or (L.get("delay_ms") or {}).get("max") for L in (link.get("up", {}), link.get("down", {}))):
+           or (L.get("delay_ms") or {}).get("max") or "counted" in L or "unknown" in L
+           for L in (link.get("up", {}), link.get("down", {}))):
         for d in ("up", "down"):
-            L = link[d]
-            ms = {k: "n/a" if v is None else f"{v:.2f}" for k, v in L["delay_ms"].items()}
+            L = {k: "n/a" if v is None else v for k, v in link[d].items()}  # null: not known (a side killed)
+            ms = {k: "n/a" if v is None else f"{v:.2f}" for k, v in link[d]["delay_ms"].items()}
             more = "".join(f" {name} {L[key]}" for key, name in (("in_flight", "in flight"), ("shed", "shed"),
                                                                   ("dropped_by_kernel", "dropped by kernel"))
                            if key in L)
             lines.append(f"link {d:4}: sent {L['sent']} delivered {L['delivered']} lost {L['lost']}{more} dup "
                          f"{L['duplicated']} reordered {L['reordered']} delay p50 {ms['p50']} ms p99 {ms['p99']} ms "
                          f"max {ms['max']} ms\n")
+            for key in ("counted", "unknown"):  # a side killed: how far the counts go, or why there are none
+                if key in L:
+                    lines.append(f"link {d:4}: {key}: {L[key]}\n")
     return lines + [f"link {jitter_capped_text(c)}\n" for c in link.get("jitter_capped") or []]
 
 

@@ -388,7 +388,7 @@ class StepSends:
     steps; more in ``again_unlisted``), and when the latest :data:`MAX_TIMED` of those resends left (step, and
     ``time.monotonic`` just before and just after the send: on one host the receiver's clock too). A step's first
     send goes before any later step's, so only a resend can leave after the receiver stopped reading steps it had
-    read: the summary tells those apart from a loss (:func:`bridge.record.summary.sends_outside`). Bounded: a long
+    read: the summary tells those apart from a loss (:func:`bridge.record.linkblock.sends_outside`). Bounded: a long
     flight keeps its ranges, its resent steps and the last resends' times, not one entry a send."""
 
     MAX_AGAIN = 4096

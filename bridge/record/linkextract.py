@@ -8,7 +8,8 @@ In:  a real-time run directory (``vehicle.tlog`` and ``controller.tlog``; withou
 Out: :class:`Extraction`: per direction the records (send time s from the trace's start, one-way delay
      s or None for lost) and its counts, the clock offset used, notes; :func:`extraction_text`, the
      trace file (``t_s, delay_ms, direction``) that ``[link] trace`` replays; :func:`step_delays`, a real-time
-     session's per-step messages' one-way delays (ms), for its ``summary.json``
+     session's per-step messages' one-way delays (ms), for its ``summary.json``; :func:`step_records`, those
+     messages each way as both tlogs hold them (a killed side's link counted up to its cut)
 
 How (tlogs): the frames of the two ends matched per source (:mod:`bridge.record.tlogmatch`), checked to be
 the two ends of one link, on one clock (``timesync``: the controller's stamps shifted by the offset).
@@ -285,11 +286,11 @@ def extract_run_dir(path: str | Path, clock: str = "same") -> Extraction:
                       f"no record of a link to extract")
 
 
-def step_delays(path: Path) -> tuple[list[float], list[float]] | None:
-    """A real-time run's per-step messages delivered, each way (the actuator targets up, ODOMETRY down): the
-    one-way delay (ms) of every one that arrived, whether a step used it or not (a late one, refused as older than
-    the newest, was delivered all the same), matched by its bytes in the run's two tlogs (both ends' stamps, one
-    host's clock: what ``bsst link extract`` reads, of these messages only). None without two readable tlogs."""
+def step_records(path: Path) -> tuple[DirectionRecords, DirectionRecords] | None:
+    """A real-time run's per-step messages each way (the actuator targets up, ODOMETRY down), matched by their bytes
+    in the run's two tlogs (both ends' stamps, one host's clock: what ``bsst link extract`` reads, of these messages
+    only): per message its send time and one-way delay (s; None: lost), counted from the first to the last one both
+    tlogs hold (a tlog cut short by a SIGKILL ends the count there). None without two readable tlogs."""
     try:  # the run's own files, not a user's input (read_tlog would note them as one)
         v, c = (parse_tlog((path / f"{side}.tlog").read_bytes(), side) for side in ("vehicle", "controller"))
     except (OSError, ConfigError):
@@ -297,9 +298,44 @@ def step_delays(path: Path) -> tuple[list[float], list[float]] | None:
     out = []
     for ids, sender, receiver in ((_TARGETS, c, v), ((_ODOMETRY,), v, c)):
         sent, recv = (by_source([f for f in log if f.msgid in ids]) for log in (sender, receiver))
-        out.append([1e3 * x for s in sent.keys() & recv.keys()
-                    for _, x in direction_records(sent[s], recv[s], 0.0).records if x is not None])
+        out.append(merge_directions(_step_records(sent[s], recv[s]) for s in sent.keys() & recv.keys()))
     return out[0], out[1]
+
+
+def _step_records(sent: Sequence[Frame], recv: Sequence[Frame]) -> DirectionRecords:
+    """One source's per-step messages as sent and as received, matched by their bytes (a step's stamp makes each
+    one's own; a second arrival of one is a duplicate): from the first to the last sent that arrived, each one's
+    delay, or None where it never did. Not from the gaps in the sequence numbers (:func:`direction_records`): the
+    source's other messages share them (counted so, a killed vehicle's first second read 8 of 242 targets lost on
+    loopback)."""
+    out = DirectionRecords()
+    waiting: dict[bytes, list[int]] = {}
+    for i, f in enumerate(sent):
+        waiting.setdefault(f.raw, []).append(i)
+    arrival: dict[int, float] = {}
+    for r in recv:
+        left = waiting.get(r.raw)
+        if not left:  # received twice, or sent after the sender's log ends (cut short)
+            out.duplicates += r.raw in waiting
+            out.outside += r.raw not in waiting
+            continue
+        arrival[left.pop(0)] = r.t
+    if arrival:
+        out.records = [(f.t, arrival[i] - f.t if i in arrival else None)
+                       for i, f in enumerate(sent) if min(arrival) <= i <= max(arrival)]
+    return out
+
+
+def step_delays(path: Path) -> tuple[list[float], list[float]] | None:
+    """A real-time run's per-step messages delivered, each way (the actuator targets up, ODOMETRY down): the
+    one-way delay (ms) of every one that arrived, whether a step used it or not (a late one, refused as older than
+    the newest, was delivered all the same), from the run's two tlogs (:func:`step_records`). None without two
+    readable tlogs."""
+    both = step_records(path)
+    if both is None:
+        return None
+    up, down = ([1e3 * x for _, x in d.records if x is not None] for d in both)
+    return up, down
 
 
 def _half_rows(path: Path, names: Sequence[str], optional: str) -> list[dict[str, float]]:

@@ -264,6 +264,7 @@ def summarise(
         "seed": mission.seed,
         "rate_hz": mission.rate_hz,
         "duration_s": _num(flown),
+        "mission_duration_s": float(mission.duration_s),  # as asked: a flight cut short flew less (duration_s)
         "rms_from_s": float(rms_from),
         "rms_3d": _num(rms_3d(trace, rms_from)) if n else None,
         "axes": axes,

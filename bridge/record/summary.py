@@ -42,6 +42,7 @@ from bridge.record.interventions import (
     unconfirmed_text,
 )
 from bridge.record.joiner import Joined
+from bridge.record.linkblock import Cut, link_block
 from bridge.record.metrics import after_faults, not_reached, percentiles, plant_summary, summarise
 from bridge.record.policies import (
     CONTROLLER_ID,
@@ -88,6 +89,7 @@ class SessionFacts:
     off_clock_t: float | None = None
     sitl: Mapping[str, Any] = field(default_factory=dict)
     mission_transfer: Mapping[str, Any] | None = None  # --await-mission: the downloads, as the controller said them
+    cut: Cut | None = None  # a side that died without its stats: the link counted from both tlogs up to its cut
 
 
 @dataclass(frozen=True)
@@ -201,145 +203,6 @@ def ended_by(outcome: str, trace: Mapping[str, Any], flight: Flight, facts: Sess
     return outcome, ended_by_outcome(outcome, mission)
 
 
-def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[str, Any],
-               relay: Mapping[str, Any] | None) -> dict[str, Any]:
-    """``summary.json["link"]`` (docs/design.md, "Files of a run") from each side's ``stats`` (``vehicle``,
-    ``controller``; empty when a side left none), the join's measures, and the relay's statistics, per direction:
-
-    - lockstep: the link model's exact statistics, from the end that applies it (the
-      vehicle: ``up``, the controller: ``down``), ``delay_ms`` in simulation time; plus
-      ``socket_ms``, the wall-clock one-way time of the per-step messages over the socket;
-    - real time through the relay: the relay's counts (every datagram), ``delay_ms``
-      measured end to end on every per-step message delivered (ODOMETRY down, the targets up)
-      from both ends' tlogs (one host: one clock, no offset to estimate), the
-      model's schedule (``model_delay_ms``) and the delay the relay added (``relay_added_ms``);
-    - otherwise (real time, perfect link; a side that left no statistics): counts from
-      both sides, ``delay_ms`` from their stamps.
-    """
-    vs, cs = vehicle, controller
-    # what each side's receive path refused (bridge.mavlink.receive), and all of it by reason
-    by = {"vehicle": dict(vs.get("rejected", {})), "controller": dict(cs.get("rejected", {}))}
-    rejected = {r: by["vehicle"].get(r, 0) + by["controller"].get(r, 0)
-                for r in sorted(set(by["vehicle"]) | set(by["controller"]))}
-    own = int(vs.get("rejected_from_controller", sum(by["vehicle"].values())))  # of the controller's datagrams
-    measured = {"up": percentiles(joined.up_ms), "down": percentiles(joined.down_ms)}
-    model = {"up": vs.get("up"), "down": cs.get("down")}
-    sides = {"up": socket_counts(int(cs.get("commands", joined.commands)), int(vs.get("accepted", 0)), own,
-                                 *targets_outside(vs, cs), kernel=vs.get("kernel_drops")),
-             # a killed controller left no stats: its rows, the steps they answer, and no time it stopped reading
-             "down": socket_counts(int(vs.get("odometry_sent", 0)), int(cs.get("states", joined.commands)),
-                                   int(cs.get("states_refused", 0)),
-                                   *sends_outside(vs, cs if "state_window" in cs
-                                                  else {"state_window": joined.controller_steps}),
-                                   kernel=cs.get("kernel_drops"))}
-    sides["up"]["reordered"] = int(rejected.get("reordered", 0))
-    out: dict[str, Any] = {}
-    for d in ("up", "down"):
-        if relay is not None:
-            r = relay[d]
-            out[d] = {**{k: r[k] for k in ("sent", "delivered", "lost", "duplicated", "reordered", "in_flight",
-                                           "lost_by")},
-                      # the relay's socket of this direction: what the kernel dropped before the relay read it
-                      "dropped_by_kernel": (relay.get("kernel_drops") or {}).get(d),
-                      "delay_ms": measured[d], "model_delay_ms": r["delay_ms"], "relay_added_ms": r["measured_ms"]}
-            if "trace" in r:  # a replayed link trace: its own delays and losses, as offline
-                out[d]["trace"] = r["trace"]
-        elif model[d]:
-            out[d] = {**model[d], "socket_ms": measured[d]}
-        else:
-            out[d] = {**sides[d], "delay_ms": measured[d]}
-    out["rejected"] = rejected
-    out["rejected_by"] = by
-    # of those, how many came from the other side itself, and how many from anyone else on the link (a
-    # ground station's, a stranger's): the vehicle counts its controller's apart from the GCS link's
-    ctl_own = int(cs.get("rejected_from_vehicle", sum(by["controller"].values())))
-    out["rejected_from_peer"] = {"vehicle": own, "controller": ctl_own}
-    out["rejected_from_others"] = {"vehicle": max(0, sum(by["vehicle"].values()) - own),
-                                   "controller": max(0, sum(by["controller"].values()) - ctl_own)}
-    if relay is not None:  # datagrams the relay refused, from neither of its two ends, by reason
-        out["relay_refused"] = relay.get("refused", {})
-        if relay.get("radio"):  # a fleet's one radio in real time: this vehicle's part of it, by direction
-            out["radio"] = relay["radio"]
-    elif vs.get("radio") or cs.get("radio"):  # in lockstep: the vehicle's commands, the controller's states
-        out["radio"] = {"up": vs.get("radio"), "down": cs.get("radio")}
-    return out
-
-
-def socket_counts(sent: int, delivered: int, refused: int, in_flight: int, maybe: int = 0, *,
-                  kernel: int | None) -> dict[str, Any]:
-    """One direction of a link with no model between the two sockets (real time, perfect link), every datagram
-    sent accounted for under its own name: ``delivered``; ``refused`` by the receiver; ``in_flight``, sent
-    where the receiver was not reading (outside the steps it read, after it stopped: :func:`sends_outside`),
-    plus of the ``maybe`` sends it cannot tell (read, or sent after it stopped) as many as were not read;
-    ``shed`` by the receive budgets (none: the peer is exempt, docs/hostile-input.md); ``dropped_by_kernel`` (the
-    receiving socket's counter, :func:`bridge.mavlink.kerneldrops.socket_drops`; 0 where unknown); ``lost`` on the
-    link, the rest (sent = delivered + refused + lost + in_flight + shed + dropped_by_kernel)."""
-    dropped = int(kernel or 0)
-    in_flight += min(maybe, max(0, sent - delivered - refused - in_flight - dropped))
-    return {"sent": sent, "delivered": delivered, "lost": sent - delivered - refused - in_flight - dropped,
-            "duplicated": 0, "reordered": 0, "refused": refused, "in_flight": in_flight, "shed": 0,
-            "dropped_by_kernel": dropped, "kernel_counts": kernel is not None}
-
-
-def sends_outside(vehicle: Mapping[str, Any], controller: Mapping[str, Any]) -> tuple[int, int]:
-    """Of the vehicle's state sends (its ``stats``: :class:`bridge.mavlink.receive.StepSends`), how many the
-    controller surely never read, and how many it may not have: (surely, maybe). Surely: every send of a step
-    outside the controller's window of steps read (``state_window``; each resend of one too), and a resend of a
-    step inside it that left after the controller stopped reading (``read_until``; the resend's time before it
-    left later: one host, one monotonic clock). Maybe: a resend that was leaving just then, one of steps past
-    the vehicle's list, and the resends older than those it timed when even its oldest timed one left after."""
-    window = controller.get("state_window")
-    again = [(int(k), int(n)) for k, n in vehicle.get("odometry_again") or []]
-    unlisted = int(vehicle.get("odometry_again_unlisted", 0))
-    surely = steps_outside(vehicle.get("odometry_steps") or [], window)
-    if window is None:  # it read none: every send
-        return surely + sum(n for _, n in again) + unlisted, 0
-    lo, hi = window
-    surely += sum(n for k, n in again if not lo <= k <= hi)
-    inside = sum(n for k, n in again if lo <= k <= hi)  # resends of steps it read: before it stopped, or after
-    until = controller.get("read_until")
-    if until is None:  # it did not say when it stopped reading
-        return surely, unlisted + inside
-    resent = vehicle.get("odometry_resent") or []  # the latest resends, oldest first: [step, before, after]
-    timed = [(a, b) for k, a, b in resent if lo <= k <= hi]
-    after, leaving = left_after(timed, until)
-    untimed = sum(n for _, n in again) + unlisted - len(resent)  # older than those timed
-    unsure = max(0, min(untimed, inside - len(timed))) if untimed > 0 and resent and resent[0][1] > until else 0
-    return surely + after, unlisted + leaving + unsure
-
-
-def targets_outside(vehicle: Mapping[str, Any], controller: Mapping[str, Any]) -> tuple[int, int]:
-    """Of the controller's targets, how many surely left after the vehicle stopped reading (its ``read_until``; the
-    controller's latest targets timed, ``targets_left``), and how many may have (leaving just then; older than those
-    timed when even the oldest timed left after): (surely, maybe). (0, 0) where either side did not say."""
-    until = vehicle.get("read_until")
-    timed = [(a, b) for a, b in controller.get("targets_left") or []]
-    if until is None or not timed:
-        return 0, 0
-    after, leaving = left_after(timed, until)
-    older = int(controller.get("commands", 0)) - len(timed)
-    return after, leaving + (older if older > 0 and timed[0][0] > until else 0)
-
-
-def left_after(timed: Sequence[tuple[float, float]], until: float) -> tuple[int, int]:
-    """Of sends timed ``(before, after)`` (s, ``time.monotonic``), how many surely left after ``until`` (the
-    receiver's last look found its socket empty then: queued before it, read; after it, never) and how many were
-    leaving at that very time (read or not)."""
-    return sum(a > until for a, _ in timed), sum(a <= until <= b for a, b in timed)
-
-
-def steps_outside(sent: Sequence[Sequence[int]], window: Sequence[int] | None) -> int:
-    """How many of the steps ``sent`` (inclusive ``[first, last]`` ranges,
-    :class:`bridge.mavlink.receive.StepRanges`) lie outside the receiver's ``window`` ([first, last] step read;
-    None: it read none, all of them)."""
-    total = sum(b - a + 1 for a, b in sent)
-    if window is None:
-        return total
-    lo, hi = window
-    inside = sum(max(0, min(b, hi) - max(a, lo) + 1) for a, b in sent)
-    return total - inside
-
-
 def timing_block(joined: Joined, rate_hz: float, wall_s: float, vehicle: Mapping[str, Any],
                  controller: Mapping[str, Any]) -> dict[str, Any]:
     """``summary.json["timing"]``: the session's wall time, the flight's pace and the per-step times (ms)."""
@@ -434,7 +297,7 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     vs = vehicle.stats if vehicle is not None else {}
     cs = controller.stats if controller is not None else {}
     arrays = trace_arrays(joined.rows, TRACE_COLUMNS)
-    link = link_block(joined, vs, cs, relay_stats if relay is not None else None)
+    link = link_block(joined, vs, cs, relay_stats if relay is not None else None, facts.cut)
     if caps := flight.link.jitter_capped():  # the delay capped a jitter: not flown as asked (docs/links.md)
         link["jitter_capped"] = caps
     mission, hop = split_at_start(events)  # (the hop: a ground station's own flight before an awaited mission's start)

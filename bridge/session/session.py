@@ -33,6 +33,8 @@ from bridge.record.endedby import failsafe_not_resumed
 from bridge.record.ending import end_block, end_not_taken
 from bridge.record.events import RunEvent, split_at_start
 from bridge.record.joiner import TraceJoiner, off_clock_time
+from bridge.record.linkblock import Cut
+from bridge.record.linkextract import step_records
 from bridge.record.missionclock import MissionClock
 from bridge.record.runlog import EventLog, Run, RunRecord
 from bridge.record.summary import ChildEnd, SessionFacts, SessionSummary, controller_completed, session_summary
@@ -152,7 +154,7 @@ class Session:
                   "speed": self.speed, "died": self.died, "signed": self.key is not None,
                   **({"flew_on": True} if self.flying_on else {}),  # taken over, it flew on (a fleet's: fleet.py)
                   **({"gate": self.vehicle.stats.get("gate") if self.vehicle else None} if self.gate else {})},
-            mission_transfer=self.transfer)
+            mission_transfer=self.transfer, cut=self._cut())
         events = self.clock.on_mission_clock(self.events)
         out = session_summary(self.flight, facts, joined, events, _end(self.vehicle), _end(self.controller),
                               _end(self.relay), self._relay_stats(), (CONTROLLER_SYSID, CONTROLLER_COMPID))
@@ -451,6 +453,14 @@ class Session:
             sys.stderr.write(f"\rsitl t {t:7.2f} / {self.flight.mission.duration_s:.2f} s   "
                              f"real-time factor {t / max(wall, 1e-9):6.1f}x   3-D error {err:.2e} m   ")
             sys.stderr.flush()
+
+    def _cut(self) -> Cut | None:
+        """The vehicle or controller that died without its stats report (killed), with the per-step messages both
+        tlogs hold up to its cut: the link's counts where its own are missing (None: none died so)."""
+        dead = next((c for c in (self.vehicle, self.controller) if c is not None and c.name == self.died), None)
+        if dead is None or dead.stats:
+            return None
+        return Cut(dead.name, dead.exit_text(), step_records(self.path))
 
     def _relay_stats(self) -> dict[str, Any] | None:
         """What ``bsst relay --stats`` wrote on exit (None without a relay or a readable file)."""
