@@ -8,6 +8,7 @@ a minute on two cores; those that check a count, a refusal or a file, a 2 s one.
 
 from __future__ import annotations
 
+import csv
 import hashlib
 import json
 import math
@@ -26,7 +27,7 @@ import pytest
 from bridge import simulate
 from bridge.cli import main
 from bridge.sweep import CELLS_CSV, COLUMNS, Cell, Classes, Grid, SweepFailed, load_sweep, read_cells, sweep
-from bridge.sweep.cells import FLEET_COLUMNS, ripple_rms
+from bridge.sweep.cells import FLEET_COLUMNS, format_row, parse_row, ripple_rms, row_from_run
 from bridge.sweep.classes import CLASSES, classify
 from bridge.sweep.executors import run_cell
 from bridge.sweep.grid import cells as grid_cells
@@ -921,3 +922,16 @@ def test_a_row_of_a_law_without_a_super_twisting_step_is_flown_again_without_a_d
                                                                 "--seed 1"
     bsst = {**row, "controller": "bsst", "discretization": "explicit"}
     assert "--discretization explicit --seed 1" in reproduce(bsst, ("controller", "discretization"))
+
+
+def test_a_cells_link_counts_a_killed_child_left_unknown_stay_empty_not_0() -> None:
+    """A session whose child was killed with no tlogs to count from has its link counts null (docs/sitl.md, "A child
+    killed"): the cell's counts are empty, read back as None, never 0 (``int(None)`` failed before, the third wave's
+    forty-second session)."""
+    run = simulate(Mission(Sine(), duration_s=0.2, name="sine"), plots=False)
+    run.summary["link"]["up"].update(sent=None, delivered=None, lost=None)
+    row = row_from_run(Cell("bsst", 250, 0.0, 0.0, 0.0, 0.0, 0), run)
+    assert row["up_sent"] is None and row["up_lost"] is None and row["down_sent"] == 50, row
+    back = parse_row(next(csv.reader([format_row(row)])))
+    assert back["up_sent"] is None and back["down_sent"] == 50, back
+

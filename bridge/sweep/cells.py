@@ -110,16 +110,20 @@ def row_from_run(cell: Cell, run: Run) -> dict[str, Any]:
         "tv_u2": s["inputs"]["u2"]["tv_per_s"],
         "ripple_u2": ripple if ripple is None or math.isfinite(ripple) else None,
         "outcome": s["outcome"],
-        "up_sent": int(up.get("sent", 0)),
-        "up_lost": int(up.get("lost", 0)),
-        "down_sent": int(down.get("sent", 0)),
-        "down_lost": int(down.get("lost", 0)),
+        **{f"{d}_{k}": _count(side, k) for d, side in (("up", up), ("down", down)) for k in ("sent", "lost")},
         "flown_s": s.get("duration_s"),
         # a law that failed in flight measured nothing: the row says why, as a cell that could not be flown does
         "error": one_line(str(s.get("ended_by", {}).get("how", ""))) if s["outcome"] in FAILED else "",
         "policies": policies_cell([s.get("policies")]),
         "jitter_capped": jitter_cell(link.get("jitter_capped") or ()),
     }
+
+
+def _count(side: Mapping[str, Any], key: str) -> int | None:
+    """A link direction's count (none: 0); null where a side killed left it unknown (its ``unknown``), as the
+    cell's empty value, never 0."""
+    v = side.get(key, 0)
+    return None if v is None else int(v)
 
 
 def broke_policy(row: Mapping[str, Any]) -> bool:
@@ -173,8 +177,8 @@ def row_from_fleet(cell: Cell, run: FleetRun) -> dict[str, Any]:
     for c in WORST_OF:
         values = [r[c] for r in rows if r[c] is not None]
         out[c] = max(values) if values else None
-    for c in ("up_sent", "up_lost", "down_sent", "down_lost"):
-        out[c] = sum(r[c] for r in rows)
+    for c in ("up_sent", "up_lost", "down_sent", "down_lost"):  # unknown for one vehicle: unknown for the fleet
+        out[c] = None if any(r[c] is None for r in rows) else sum(r[c] for r in rows)
     out["flown_s"] = max((r["flown_s"] for r in rows if r["flown_s"] is not None), default=None)
     errors = [f"vehicle {i}: {r['error']}" for i, r in zip(ids, rows) if r["error"]]
     out.update(outcome=run.summary["outcome"], worst_vehicle=ids[worst],
