@@ -524,8 +524,10 @@ def test_a_stall_while_the_first_state_is_awaited_is_not_the_missions(tmp_path: 
     assert stopped
     done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
     values = stats_of(ctl.lines)
-    assert done[0].outcome == "completed" and rc == 0, ctl.lines[-5:]
-    assert not any(ln.startswith(CONTROLLER_STALLED) for ln in ctl.lines), ctl.lines[-5:]
-    # the stop fell in the wait (the premise): its stall listed apart, a tick it stopped late by the 0.2 s
+    # the stop fell in the wait (the premise): its stall listed apart, a tick it stopped late by the 0.2 s; the
+    # mission's own stalls, if any, are the loaded machine's (10.7 ms at t=0.82 s once in a make test): said, exit 1
     assert values["stalls_waiting"]["worst_ms"] >= 180.0, values["stalls_waiting"]
     assert values["stalls"]["worst_ms"] < 180.0, values["stalls"]
+    machine = values["stalls"]["count"] > 0
+    assert done[0].outcome == "completed" and rc == int(machine), ctl.lines[-5:]
+    assert any(ln.startswith(CONTROLLER_STALLED) for ln in ctl.lines) == machine, ctl.lines[-5:]
