@@ -528,6 +528,6 @@ def test_a_stall_while_the_first_state_is_awaited_is_not_the_missions(tmp_path: 
     # mission's own stalls, if any, are the loaded machine's (10.7 ms at t=0.82 s once in a make test): said, exit 1
     assert values["stalls_waiting"]["worst_ms"] >= 180.0, values["stalls_waiting"]
     assert values["stalls"]["worst_ms"] < 180.0, values["stalls"]
-    machine = values["stalls"]["count"] > 0
+    machine = any(ln.startswith(CONTROLLER_STALLED) for ln in ctl.lines)
     assert done[0].outcome == "completed" and rc == int(machine), ctl.lines[-5:]
-    assert any(ln.startswith(CONTROLLER_STALLED) for ln in ctl.lines) == machine, ctl.lines[-5:]
+    assert not machine or values["stalls"]["count"] > 0, values["stalls"]
