@@ -96,6 +96,8 @@ def look_up(path: str | Path) -> tuple[os.stat_result | None, str | None]:
         return None, None
     except OSError as exc:
         return None, exc.strerror or str(exc)
+    except ValueError:  # a NUL byte in it: no path the system can take
+        return None, "a NUL byte in the path"
 
 
 def unreachable(path: str | Path) -> str | None:

@@ -534,7 +534,7 @@ def test_a_run_directory_another_run_writes_is_refused_and_kept_whole(tmp_path: 
     own beside what the first wrote after (its summary.json and events.log, the second's mission.toml and
     trace.csv)."""
     out = tmp_path / "same"
-    first = Proc.bsst("sitl", str(short_sine(tmp_path, 3.0)), "--realtime", "--out", str(out), "--no-plots",
+    first = Proc.bsst("sitl", str(short_sine(tmp_path, 5.0)), "--realtime", "--out", str(out), "--no-plots",
                       cwd=ROOT)
     try:
         wait_for(lambda: (out / "vehicle.bin").is_file() and (out / "vehicle.bin").stat().st_size > 0
@@ -552,7 +552,7 @@ def test_a_run_directory_another_run_writes_is_refused_and_kept_whole(tmp_path: 
         first.stop()
     summary = json.loads((out / "summary.json").read_text())
     assert status == clean_exit(summary), first.lines[-5:]
-    assert summary["duration_s"] == 3.0 and "duration_s = 3.0" in (out / "mission.toml").read_text()
+    assert summary["duration_s"] == 5.0 and "duration_s = 5.0" in (out / "mission.toml").read_text()
     again = _sim(short_sine(tmp_path / "other", 1.0), "--out", out, "--overwrite")
     assert again.returncode == 0, again.stderr
 
@@ -571,10 +571,11 @@ def test_a_sessions_switch_that_is_not_true_or_false_is_refused(tmp_path: Path, 
 
 
 @pytest.mark.parametrize("command", [("sweep", "--delay", "0,10"), ("sweep", "--delay", "0,10", "--resume"),
-                                     ("sim",)])
+                                     ("sim",), ("margin", "--over", "delay_ms", "--until", "rms=0.1")])
 def test_a_directory_another_process_writes_is_refused_by_sweeps_and_sims(tmp_path: Path, command: tuple) -> None:
     """While another process writes a directory (here this test, holding it as a run does), ``bsst sweep`` into it,
-    a resume of a sweep there, and ``bsst sim --overwrite`` are refused (exit 2, naming this pid), nothing cleared."""
+    a resume of a sweep there, ``bsst sim --overwrite`` and ``bsst margin --overwrite`` are refused (exit 2, naming
+    this pid), nothing cleared (margin's margin.json written at the end of its search cleared a run's files)."""
     out = tmp_path / "held"
     out.mkdir()
     (out / "events.log").write_text("kept\n")

@@ -337,22 +337,25 @@ def _margin(args: argparse.Namespace) -> int:
     mission = prepare(m.with_overrides(discretization=args.discretization), Overrides(
         link=fixed or None, turbulence=args.turbulence, scatter_m=args.scatter, **sensing), axes=probe or ()).mission
     run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
-    live = sys.stderr.isatty()
+    from bridge.record.outlock import out_held  # lazy: start-up time
 
-    def show(text: str) -> None:  # a line a round: over itself on a terminal, one after the other elsewhere
-        sys.stderr.write(f"\rmargin over {args.over}: {text}   " if live else f"margin over {args.over}: {text}\n")
-        sys.stderr.flush()
+    with out_held(args.out):  # one run writes it, for the search's whole time (and its margin.json)
+        live = sys.stderr.isatty()
 
-    try:
-        res = margin(mission, args.over, until, controllers=args.controller, seeds=args.seeds,
-                     resolution=args.resolution, jobs=args.jobs, engine=args.engine, progress=show,
-                     below=args.check_below)
-    except MarginInterrupted as stop:
-        res = stop.result
-    ignore_sigint()  # the result is final, complete or not: its file, its lines and the exit status are its own
-    if live:
-        sys.stderr.write("\n")
-    return say_margin(res, args, mission.name)
+        def show(text: str) -> None:  # a line a round: over itself on a terminal, one after the other elsewhere
+            sys.stderr.write(f"\rmargin over {args.over}: {text}   " if live else f"margin over {args.over}: {text}\n")
+            sys.stderr.flush()
+
+        try:
+            res = margin(mission, args.over, until, controllers=args.controller, seeds=args.seeds,
+                         resolution=args.resolution, jobs=args.jobs, engine=args.engine, progress=show,
+                         below=args.check_below)
+        except MarginInterrupted as stop:
+            res = stop.result
+        ignore_sigint()  # the result is final, complete or not: its file, its lines and the exit status are its own
+        if live:
+            sys.stderr.write("\n")
+        return say_margin(res, args, mission.name)
 
 
 def say_margin(res: dict[str, Any], args: argparse.Namespace, name: str) -> int:

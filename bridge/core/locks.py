@@ -13,6 +13,7 @@ the run directory a run writes (bridge.record.outlock).
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import threading
@@ -26,6 +27,8 @@ def take_flock(path: str, what: str) -> tuple[int | None, int | None]:
     holding it: None where unknown). Closing the descriptor releases it. ``what`` names it in an error."""
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        with contextlib.suppress(OSError):  # (a umask of 077 made it 0600: no other user could open it to lock)
+            os.fchmod(fd, 0o644)
     except PermissionError:  # another user's file (0644, or a sticky /tmp's protected_regular): read-only locks too
         try:
             fd = os.open(path, os.O_RDONLY)

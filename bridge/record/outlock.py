@@ -1,9 +1,9 @@
 """The run directory a run writes, held for the run's life: one writer per ``--out DIR`` at a time.
 
 In:  the ``--out`` path a command was given (None: an automatic ``runs/<UTC time>-<name>``, new, never shared)
-Out: the directory held while the block runs (an ``flock`` on ``<tmp>/bsst-out-<hash of its real path>.lock``,
-     removed after), or a :class:`params.ConfigError` naming the flag, the path and the run holding it (its pid;
-     another thread's of this process by name)
+Out: the directory held while the block runs (an ``flock`` on ``/tmp/bsst-out-<hash of its real path>.lock``,
+     removed after; none where no temporary directory is writable), or a :class:`params.ConfigError` naming the
+     flag, the path and the run holding it (its pid; another thread's of this process by name)
 
 Two runs given one ``--out`` (``--overwrite`` on both) wrote into it at once: the second cleared the first's
 files and the directory ended up mixing the two runs' files (a user's tour: the first's summary.json and
@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from bridge.core.locks import Claims, take_flock
+from bridge.record.runlog import check_out_dir
 from params import ConfigError
 
 R = TypeVar("R")
@@ -29,9 +30,23 @@ OUT_LOCK = "bsst-out-{}.lock"  # in the temporary directory, by the sha256 of th
 _WRITING = Claims()  # the run directories this process's runs write (another thread's run is refused)
 
 
-def out_lock_path(real: str) -> str:
+def lock_dir() -> str | None:
+    """Where the run directories' lock files are: ``/tmp`` (one place whatever ``TMPDIR`` says, so that every run on
+    the machine meets there), else the temporary directory if it is not the working directory (Python's last
+    resort, which differs between runs); None if there is none (then no hold is taken)."""
+    if os.path.isdir("/tmp") and os.access("/tmp", os.W_OK | os.X_OK):
+        return "/tmp"
+    try:
+        d = tempfile.gettempdir()
+    except (OSError, FileNotFoundError):
+        return None
+    return None if os.path.realpath(d) == os.path.realpath(os.getcwd()) else d
+
+
+def out_lock_path(real: str, where: str | None = None) -> str:
     """The lock file of the run directory whose real path is ``real``."""
-    return os.path.join(tempfile.gettempdir(), OUT_LOCK.format(hashlib.sha256(real.encode()).hexdigest()[:24]))
+    return os.path.join(where or lock_dir() or tempfile.gettempdir(),
+                        OUT_LOCK.format(hashlib.sha256(real.encode()).hexdigest()[:24]))
 
 
 @contextlib.contextmanager
@@ -42,16 +57,24 @@ def out_held(out: str | Path | None, flag: str = "--out") -> Iterator[None]:
     if out is None:
         yield
         return
-    real = str(Path(out).resolve())
+    check_out_dir(Path(out))  # (a path that cannot be a run directory: said as run_dir says it, not traced)
+    try:
+        real = str(Path(out).resolve())
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise ConfigError(f"{flag} {out}: cannot reach it ({exc})") from None
+    where = lock_dir()
+    if where is None:  # no writable temporary directory: the run goes on unheld, as before there was a hold
+        yield
+        return
     _WRITING.claim([real], lambda _k, thread: f"{flag} {out}: in use by another run of this process (pid "
                                               f"{os.getpid()}, thread {thread!r}); give another directory")
     try:
-        fd = _take(real, flag, out)
+        fd = _take(out_lock_path(real, where), flag, out)
         try:
             yield
         finally:
             with contextlib.suppress(OSError):
-                os.unlink(out_lock_path(real))  # unlinked while held: a run that opened it before sees it gone
+                os.unlink(out_lock_path(real, where))  # unlinked while held: a run that opened it before sees it gone
             os.close(fd)
     finally:
         _WRITING.release([real])
@@ -73,9 +96,8 @@ def check_out_free(out: str | Path | None, flag: str = "--out") -> None:
         pass
 
 
-def _take(real: str, flag: str, out: str | Path) -> int:
-    """The lock of ``real``'s file, held (its descriptor), or ConfigError naming its holder."""
-    path = out_lock_path(real)
+def _take(path: str, flag: str, out: str | Path) -> int:
+    """The lock of file ``path``, held (its descriptor), or ConfigError naming its holder."""
     for _ in range(8):  # (its file removed by the run that held it, between our open and our lock: take the new one)
         fd, holder = take_flock(path, f"{flag} {out}")
         if fd is None:

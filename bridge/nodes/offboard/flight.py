@@ -394,8 +394,8 @@ class Offboard(EndFlying):
         elif emergency or self.plant_end:
             # at once: its clock halted, so waiting out the state timeout would only delay the end. Its EVENT says how
             # (the outcome: crashed, not the failsafe that may have flown before): one missed is asked for again
-            if not self.plant_end and ((not at_end and self._word_awaited(END_EVENT_TRIES)) | self.events_awaited()):
-                return None
+            if not self.plant_end and not at_end and (self._word_awaited(END_EVENT_TRIES) | self.events_awaited()):
+                return None  # (at the mission's end: ended now, its EVENT or not; waiting, it ended "completed")
             how = {"crashed": "it crashed", "diverged": "it diverged", "collision": "another vehicle touched it",
                    "terminated": "a flight termination"}.get(self.plant_end, "it crashed, diverged or was touched")
             sign = "HEARTBEAT system_status EMERGENCY" if emergency else "its EVENT"  # (a termination: disarmed)
@@ -411,6 +411,7 @@ class Offboard(EndFlying):
                 return None  # heard, no state: its plant's end (its clock halted), its HEARTBEAT EMERGENCY lost?
             self.reason = f"no new state from the vehicle for {wait:g} s"
         else:
+            self._end_ask_until = None  # all well again: a later end may ask the vehicle afresh (_word_awaited)
             return None
         # its plant's end by its EVENT; without one, a failsafe only if one was said (not its HEARTBEAT EMERGENCY)
         flew_failsafe = self.failsafe_seen not in (FailsafeSign.NONE, FailsafeSign.EMERGENCY)

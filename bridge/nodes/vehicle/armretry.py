@@ -56,6 +56,11 @@ class ArmRetries:
             arm.last_s = now
         return arm
 
+    def forget(self, source: Source) -> None:
+        """``source`` disarmed the vehicle: its arm is over (a resend of its next ARM, whose first copy was lost, is
+        that arm's, acted on; it was answered ACCEPTED as the old arm's resend, the vehicle left disarmed)."""
+        self._arms.pop(source, None)
+
     @staticmethod
     def acted(arm: Arm, result: int) -> None:
         """The vehicle acted on ``arm`` (a copy of it): ``result`` answers its later copies."""

@@ -173,7 +173,8 @@ class Commander:
             if args is None:
                 self.ports.reject("bad_number")
                 return mavlink.MAV_RESULT_DENIED, ()
-            if not args[0]:
+            if not args[0]:  # its own disarm ends its arm: an ARM it resends after is another arm's
+                self.arm_copies.forget((m.get_srcSystem(), m.get_srcComponent(), addr))
                 return self.arm_disarm(m.param1, m.param2, by), ()
             return self._arm_copy(m, by, ep, addr), ()
         asked = self.requests.run(m, by)  # SET/GET_MESSAGE_INTERVAL, REQUEST_MESSAGE, CAPABILITIES, HOME_POSITION
