@@ -211,7 +211,9 @@ def _fly_through(tmp_path: Path, lossy_hb: bool, hb_after: int = 0) -> tuple[Pro
         v.wait_report(Ready)
         link = Lossy(("127.0.0.1", LINK_PORT + n), no_heartbeat_after_arm=lossy_hb, heartbeat_after_states=hb_after)
         link.start()
-        c = Proc.bsst("controller", str(_short_mission(tmp_path, 2.0)), "--realtime", "--vehicle",
+        # (a 1 s mission: what these tests look at, the ARMs and the states before the first HEARTBEAT heard, all
+        # come before the mission's first target; a flight that ends in its failsafe never starts the mission)
+        c = Proc.bsst("controller", str(_short_mission(tmp_path, 1.0)), "--realtime", "--vehicle",
                       f"127.0.0.1:{link.port}", "--out", str(tmp_path / "c"))
         try:
             done = c.wait_report(Done, timeout=60)

@@ -307,7 +307,9 @@ def test_a_real_time_child_killed_leaves_link_counts_that_add_up_and_says_the_fl
     mission.write_text(SINE_8S)
     run = tmp_path / "run"
     with instance_slot() as n:
-        p = _bsst_sitl(n, mission, run, "--realtime")
+        # (COM_DISARM_LAND=0.5: a controller killed leaves the vehicle's failsafe to land it; its disarm, 0.5 s on
+        # the ground rather than PX4's 2 s of wall time, ends the session sooner: nothing here looks at that wait)
+        p = _bsst_sitl(n, mission, run, "--realtime", "--param", "COM_DISARM_LAND=0.5")
         try:
             wait_for(lambda: count_records(run / "vehicle.bin") > 250 or p.poll() is not None, 60,
                      "a second of flight")
