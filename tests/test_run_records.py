@@ -570,12 +570,13 @@ def test_a_sessions_switch_that_is_not_true_or_false_is_refused(tmp_path: Path, 
     assert not (tmp_path / "run").exists()
 
 
-@pytest.mark.parametrize("command", [("sweep", "--delay", "0,10"), ("sweep", "--delay", "0,10", "--resume"),
-                                     ("sim",), ("margin", "--over", "delay_ms", "--until", "rms=0.1")])
-def test_a_directory_another_process_writes_is_refused_by_sweeps_and_sims(tmp_path: Path, command: tuple) -> None:
-    """While another process writes a directory (here this test, holding it as a run does), ``bsst sweep`` into it,
-    a resume of a sweep there, ``bsst sim --overwrite`` and ``bsst margin --overwrite`` are refused (exit 2, naming
-    this pid), nothing cleared (margin's margin.json written at the end of its search cleared a run's files)."""
+@pytest.mark.parametrize("command", [("sweep", "--delay", "0,10"),
+                                     ("margin", "--over", "delay_ms", "--until", "rms=0.1")])
+def test_a_directory_another_process_writes_is_refused_by_sweeps_and_margins(tmp_path: Path, command: tuple) -> None:
+    """While another process writes a directory (here this test, holding it as a run does), ``bsst sweep`` into it
+    (its ``--resume`` takes the same hold, first) and ``bsst margin --overwrite`` are refused (exit 2, naming this
+    pid), nothing cleared (margin's margin.json written at the end of its search cleared a run's files); ``bsst sim``'s
+    refusal: the test above."""
     out = tmp_path / "held"
     out.mkdir()
     (out / "events.log").write_text("kept\n")
