@@ -86,6 +86,8 @@ class Offboard(EndFlying):
         self.way_down: dict[str, float] | None = None  # real time: that in ms and how far off it may be (stats)
         self._end_usec: int | None = None  # lockstep: the stamp of the state that ended the mission, unanswered
         self._end_height_m = 0.0
+        self._mission_zero: float | None = None
+        self._mission_end = math.inf
         self.end_unanswered: dict[str, Any] | None = None  # the end action not seen taken (its summary ``end``)
         self._end_ask_until: float | None = None  # real time: until when the vehicle is asked how its flight ended
 
@@ -306,6 +308,7 @@ class Offboard(EndFlying):
         # on the vehicle's clock (the session orders both children's events by time): it measured that state
         # the way down before it came
         self.t_mission, self._t_wall = t_end, arrived - (self._way_down or 0.0)  # (its arrival: not when read)
+        self._mission_zero, self._mission_end = k / self.rate - t_end, t_end
         self._end_height_m = max(-float(odo.z), 0.0)  # m above the start (NED z): the landing's time
         self._settle_events()
         lost = self._check_vehicle(at_end=True)  # disarmed, taken over, ... in the mission's last steps: not completed
