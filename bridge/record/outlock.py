@@ -17,6 +17,7 @@ import functools
 import hashlib
 import os
 import tempfile
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
@@ -70,6 +71,7 @@ def out_held(out: str | Path | None, flag: str = "--out") -> Iterator[None]:
                                               f"{os.getpid()}, thread {thread!r}); give another directory")
     try:
         fd = _take(out_lock_path(real, where), flag, out)
+        sweep_stale(where)
         try:
             yield
         finally:
@@ -88,6 +90,43 @@ def holding_out(run: Callable[..., R]) -> Callable[..., R]:
         with out_held(out):
             return run(*args, out=out, **keywords)
     return held
+
+
+STALE_S = 3600.0  # s: a lock file this old that nobody holds is a killed run's, removed by the next run
+STALE_SWEPT = 16  # at most this many removed by one run (each a lock tried, never waited for)
+
+
+def sweep_stale(where: str, now: float | None = None) -> int:
+    """Remove the lock files of run directories left by runs killed (SIGKILL ends a run before it removes its own),
+    older than :data:`STALE_S` and held by nobody (each taken first, then unlinked while held: a run that opened it
+    meanwhile sees it gone and takes a new one, :func:`_take`); how many were removed. Best effort, never raises."""
+    now = time.time() if now is None else now
+    removed = 0
+    try:
+        names = [n for n in os.listdir(where) if n.startswith("bsst-out-") and n.endswith(".lock")]
+    except OSError:
+        return 0
+    for name in names:
+        if removed >= STALE_SWEPT:
+            break
+        path = os.path.join(where, name)
+        try:
+            if now - os.stat(path).st_mtime < STALE_S:
+                continue
+            fd, _ = take_flock(path, "a stale run directory lock")
+        except (OSError, ConfigError):
+            continue
+        if fd is None:
+            continue  # held: a live run's
+        try:
+            if os.stat(path).st_ino == os.fstat(fd).st_ino:
+                os.unlink(path)
+                removed += 1
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+    return removed
 
 
 def check_out_free(out: str | Path | None, flag: str = "--out") -> None:
