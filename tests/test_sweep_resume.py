@@ -160,7 +160,11 @@ def test_a_ctrl_c_after_the_last_cell_was_handed_out_leaves_a_whole_sweep(tmp_pa
                 "--out", str(out))
     _, said, told = _stopped(proc, "ctrl-c", lambda: wait_for(lambda: _rows_written(out) >= 1, 60,
                                                               "cells.csv's first row"))
-    assert "sweep: interrupted; the cells in flight end first" in told, told
+    # said ("sweep: interrupted; the cells in flight end first") when it came while cells flew; one that came once all
+    # three had flown (a loaded machine's late signal: a make test) is held while the record is written and said by
+    # nobody (the next test): the sweep whole either way
+    if "sweep: interrupted; the cells in flight end first" not in told:
+        assert told.index("3/3 cells") >= 0, told
     assert proc.returncode == 0 and "cells not flown" not in told, (said, told)
     assert len(read_cells(out / CELLS_CSV)) == 3 and (out / "report.md").is_file(), said
 
