@@ -164,7 +164,7 @@ def test_a_ctrl_c_after_the_last_cell_was_handed_out_leaves_a_whole_sweep(tmp_pa
     # three had flown (a loaded machine's late signal: a make test) is held while the record is written and said by
     # nobody (the next test): the sweep whole either way
     if "sweep: interrupted; the cells in flight end first" not in told:
-        assert told.index("3/3 cells") >= 0, told
+        assert "3/3 cells" in told, told
     assert proc.returncode == 0 and "cells not flown" not in told, (said, told)
     assert len(read_cells(out / CELLS_CSV)) == 3 and (out / "report.md").is_file(), said
 
