@@ -82,9 +82,18 @@ def end_not_taken(outcome: str, action: str, events: Sequence[RunEvent], end_s: 
         return None
     why = said.rpartition("): ")[2] if "): " in said else "accepted"  # its answer: "no answer", "MAV_RESULT 4"
     down = next((e for e in ev if e.kind == "disarmed" and (fs is None or e.t >= fs.t)), None)
-    return {"action": action, "taken": False, "why": why, "failsafe": None if fs is None else fs.text,
-            "failsafe_t": None if fs is None else fs.t, "late_t": None if mode is None else mode.t,
-            "disarmed": down is not None, "disarmed_t": None if down is None else down.t}
+    return end_not_taken_block(action, why, None if fs is None else fs.text, None if fs is None else fs.t,
+                               None if mode is None else mode.t, None if down is None else down.t)
+
+
+def end_not_taken_block(action: str, why: str, failsafe: str | None, failsafe_t: float | None,
+                        late_t: float | None, disarmed_t: float | None) -> dict[str, Any]:
+    """``summary.json["end"]`` of an end action not taken at the mission's end (s, mission time): its command's answer
+    (``why``), the failsafe that flew instead and when, when the action was taken late (None: never), when the
+    vehicle disarmed (None: not seen to). The one shape :func:`end_not_taken` (a session) and a controller alone that
+    saw it taken late give it."""
+    return {"action": action, "taken": False, "why": why, "failsafe": failsafe, "failsafe_t": failsafe_t,
+            "late_t": late_t, "disarmed": disarmed_t is not None, "disarmed_t": disarmed_t}
 
 
 def end_unanswered(action: str, why: str, silent_s: float) -> dict[str, Any]:

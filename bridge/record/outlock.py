@@ -44,10 +44,9 @@ def lock_dir() -> str | None:
     return None if os.path.realpath(d) == os.path.realpath(os.getcwd()) else d
 
 
-def out_lock_path(real: str, where: str | None = None) -> str:
-    """The lock file of the run directory whose real path is ``real``."""
-    return os.path.join(where or lock_dir() or tempfile.gettempdir(),
-                        OUT_LOCK.format(hashlib.sha256(real.encode()).hexdigest()[:24]))
+def out_lock_path(real: str, where: str) -> str:
+    """The lock file, in directory ``where`` (:func:`lock_dir`), of the run directory whose real path is ``real``."""
+    return os.path.join(where, OUT_LOCK.format(hashlib.sha256(real.encode()).hexdigest()[:24]))
 
 
 @contextlib.contextmanager
@@ -70,13 +69,14 @@ def out_held(out: str | Path | None, flag: str = "--out") -> Iterator[None]:
     _WRITING.claim([real], lambda _k, thread: f"{flag} {out}: in use by another run of this process (pid "
                                               f"{os.getpid()}, thread {thread!r}); give another directory")
     try:
-        fd = _take(out_lock_path(real, where), flag, out)
+        path = out_lock_path(real, where)
+        fd = _take(path, flag, out)
         sweep_stale(where)
         try:
             yield
         finally:
             with contextlib.suppress(OSError):
-                os.unlink(out_lock_path(real, where))  # unlinked while held: a run that opened it before sees it gone
+                os.unlink(path)  # unlinked while held: a run that opened it before sees it gone
             os.close(fd)
     finally:
         _WRITING.release([real])

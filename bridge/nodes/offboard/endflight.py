@@ -21,7 +21,7 @@ from bridge.core.flight import Flight
 from bridge.mavlink.endpoint import Spinner, wait
 from bridge.mavlink.modes import MAIN_AUTO, SUB_LOITER
 from bridge.nodes.offboard.realtime import RealtimeFlying
-from bridge.record.ending import end_unanswered
+from bridge.record.ending import end_not_taken_block, end_unanswered
 
 
 class EndFlying(RealtimeFlying):
@@ -88,10 +88,9 @@ class EndFlying(RealtimeFlying):
         if not (self._mission_end - 0.5 / self.rate <= took < taken_t):
             return
         self._at_end_now()
-        self.end_unanswered = {"action": self.flight.mission.end_action, "taken": False, "why": "accepted",
-                               "failsafe": "its EVENT FAILSAFE", "failsafe_t": round(took, 3),
-                               "late_t": round(taken_t, 3), "disarmed": not self.vehicle_armed,
-                               "disarmed_t": None if self.vehicle_armed else round(self.t_mission, 3)}
+        self.end_unanswered = end_not_taken_block(self.flight.mission.end_action, "accepted", "its EVENT FAILSAFE",
+                                                  round(took, 3), round(taken_t, 3),
+                                                  None if self.vehicle_armed else round(self.t_mission, 3))
 
     def _await_landing(self) -> bool:
         """Serve the link until the vehicle has disarmed on the ground (True), or :attr:`reason` says why not:

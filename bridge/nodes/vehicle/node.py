@@ -423,11 +423,11 @@ class Vehicle:
     def _housekeeping(self, take: Callable[[Any, Any, tuple[str, int]], None] | None = None) -> None:
         """Wall-clock duties: GCS commands (to ``take``, else :meth:`_handle`), heartbeat, streams, flushing files."""
         now = time.monotonic()
-        if self.gcs is not None:  # in lockstep with the controller's link first (sweep); real time's is read only
-            # where a stall's catch-up holds what came late (_wait_until)
-            lockstep = self.cfg.clock != "realtime"
-            got = sweep((self.link, self.gcs)) if lockstep and self.gcs.queued() else \
-                [(self.gcs, m, addr) for m, addr in self.gcs.poll()] if not lockstep else ()
+        if self.gcs is not None:
+            if self.cfg.clock == "realtime":  # the controller's link only where a stall's catch-up holds it
+                got = [(self.gcs, m, addr) for m, addr in self.gcs.poll()]
+            else:  # with the controller's link first: an answer sent before a HOLD is read before it (sweep)
+                got = sweep((self.link, self.gcs)) if self.gcs.queued() else []
             for ep, m, addr in got:
                 (take or self._handle)(ep, m, addr)
         with self.receiver.charged():  # a re-request to a would-be controller: within its trial's credit
