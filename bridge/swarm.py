@@ -338,7 +338,8 @@ def _fly_together(steps: list[Generator[Step, str | None, Run]], starts: list[Se
 def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Watch,
                   clock: str = "offline", instance: int = 0) -> dict[str, Any]:
     """The fleet's ``summary.json``: the worst outcome decides; vehicle i's system id ``instance`` + i (PX4's);
-    ``duration_s`` the longest any vehicle flew (each one's time flown: bridge.record.metrics), not the mission's."""
+    ``duration_s`` the longest any vehicle flew (each one's time flown: bridge.record.metrics), not the mission's
+    (``mission_duration_s``, as one vehicle's summary has it)."""
     rank = {o: i for i, o in enumerate(SEVERITY)}
     vehicles = []
     policies = [watch.verdict()]
@@ -360,6 +361,7 @@ def fleet_summary(m: Mission, flights: list[Flight], runs: list[Run], watch: Wat
     flown = [r.summary.get("duration_s") for r in runs]
     return {"mission": m.name, "clock": clock, "rate_hz": m.rate_hz,
             "duration_s": max((d for d in flown if d is not None), default=0.0),
+            "mission_duration_s": float(m.duration_s),  # as asked (a fleet whose every vehicle ended early flew less)
             "controller": m.controller, "profile": m.profile, "outcome": worst, "rms_3d": max(rms) if rms else None,
             "vehicles": vehicles, "separation": watch.summary(), "policies": policies}
 

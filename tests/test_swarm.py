@@ -43,6 +43,7 @@ def test_four_in_a_line_fly_two_metres_apart_each_tracking_as_one_does(tmp_path:
     run = simulate(short_sine(tmp_path), vehicles=4, formation="line:2", out=tmp_path / "run", plots=False)
     assert isinstance(run, FleetRun) and run.outcome == "completed"
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert s["duration_s"] == s["mission_duration_s"] == 3.0  # flown whole: the header says no mission length
     assert [v["id"] for v in s["vehicles"]] == [1, 2, 3, 4] == [v["sysid"] for v in s["vehicles"]]
     assert all(v["outcome"] == "completed" and v["ok"] for v in s["vehicles"])
     one = s["vehicles"][0]["rms_3d"]  # vehicle 1 flies the single vehicle's bytes (the test below)
@@ -379,17 +380,19 @@ def test_a_fleets_duration_is_its_time_flown_and_its_summary_lists_each_vehicles
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``bsst sim --vehicles 2 --profile x500 --at 1.5:motor:1=0 --at 0.5:gust:2,1,90`` of 3 s: both vehicles
     diverge before 2 s, and the fleet's ``duration_s`` (summary.json and the printed header) is the time they flew,
-    as one vehicle's is; the printed summary lists each vehicle's events (the gust, the fault, the divergence) under
+    as one vehicle's is, with the mission's 3 s beside it (``mission_duration_s``), as one vehicle's header says a
+    flight cut short; the printed summary lists each vehicle's events (the gust, the fault, the divergence) under
     it, as one vehicle's does. Until the third wave's thirty-ninth session the fleet said the mission's 3.00 s and
-    listed no event."""
+    listed no event; until its forty-third the fleet's header said ``duration 1.73 s`` alone (no mission length
+    in its summary.json)."""
     assert main(["sim", str(short_sine(tmp_path)), "--vehicles", "2", "--profile", "x500", "--at", "1.5:motor:1=0",
                  "--at", "0.5:gust:2,1,90", "--out", str(tmp_path / "r"), "--no-plots"]) == 1
     s = json.loads((tmp_path / "r" / "summary.json").read_text())
     flown = [json.loads((tmp_path / "r" / v["dir"] / "summary.json").read_text())["duration_s"] for v in s["vehicles"]]
     assert [v["outcome"] for v in s["vehicles"]] == ["diverged", "diverged"] and max(flown) < 2.0, flown
-    assert s["duration_s"] == max(flown)
     out = capsys.readouterr().out
-    assert f"duration {max(flown):.2f} s" in out.splitlines()[0], out
+    assert out.splitlines()[0].endswith(f"duration {max(flown):.2f} s of the mission's 3 s (cut short)"), out
+    assert s["duration_s"] == max(flown) and s["mission_duration_s"] == 3.0
     for said in ("  event t=0.500 wind: gust 1 m/s from 90 deg over 2 s", "  event t=1.500 fault: motor 1: off",
                  "diverged: tilt beyond 90 degrees"):
         assert out.count(said) == 2, out

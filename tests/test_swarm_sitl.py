@@ -157,7 +157,8 @@ def _two_instances() -> Iterator[int]:
 def test_ctrl_c_stops_every_pair_and_each_summary_says_aborted(tmp_path: Path) -> None:
     """``bsst sitl --vehicles 2`` forked warm by the fork server (a cold ``python -c`` flying ``bridge.swarm.sitl``
     started its own fork server too: ~1.9 CPU-s of imports for a second of flight), SIGINT after a second of flight
-    of both vehicles."""
+    of both vehicles. Its printed header says the mission's 30 s beside the time flown (until the third wave's
+    forty-third session it said the time flown alone)."""
     run = tmp_path / "run"
     with _two_instances() as b:
         p = Proc.bsst("sitl", str(short_sine(tmp_path, 30.0)), "--vehicles", "2", "--instance", str(b), "--out",
@@ -173,6 +174,9 @@ def test_ctrl_c_stops_every_pair_and_each_summary_says_aborted(tmp_path: Path) -
     assert p.p.returncode == 1, p.lines[-20:]
     s = json.loads((run / "summary.json").read_text())
     assert s["outcome"] == "aborted" and [v["outcome"] for v in s["vehicles"]] == ["aborted", "aborted"]
+    # its header gives the time flown with the mission's length beside it, as one vehicle's does
+    head = f"mission sine  2 vehicles  clock lockstep  rate 250 Hz  duration {s['duration_s']:.2f} s"
+    assert f"{head} of the mission's 30 s (cut short)" in p.lines, p.lines[:3]
     for i in (1, 2):
         own = json.loads((run / f"vehicle-{i}" / "summary.json").read_text())
         assert own["ended_by"]["who"] == "user"

@@ -41,7 +41,7 @@ def report_fleet(run: Any, command: str) -> int:
     try:
         w = sys.stdout.write
         w(f"mission {s['mission']}  {len(s['vehicles'])} vehicles  clock {s['clock']}  rate {s['rate_hz']:g} Hz  "
-          f"duration {s['duration_s']:.2f} s\noutcome: {s['outcome']}\n")
+          f"duration {duration_text(s)}\noutcome: {s['outcome']}\n")
         for v, r in zip(s["vehicles"], run.runs, strict=True):
             rms = "n/a" if v["rms_3d"] is None else f"{v['rms_3d']:.3e} m"
             where = "its own trajectory" if v["trajectory"] == "own" else f"offset {v['offset']} m"
