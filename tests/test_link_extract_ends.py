@@ -20,7 +20,8 @@ import pytest
 from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.link.trace import read_trace
-from bridge.record.linkextract import step_delays
+from bridge.record.linkblock import Cut, cut_counts
+from bridge.record.linkextract import step_delays, step_records
 from tests.sitlkit import ENV, ROOT, run_bsst
 from tests.test_link_trace import _frame, _tlog
 
@@ -40,11 +41,13 @@ def refused(p: subprocess.CompletedProcess[str]) -> str:
     return p.stderr.strip()
 
 
-def our_link(steps: int, early_at: int | None = None, early_s: float = 0.0, still: bool = False) -> tuple[bytes, bytes]:
+def our_link(steps: int, early_at: int | None = None, early_s: float = 0.0, still: bool = False,
+             held: tuple[int, ...] = ()) -> tuple[bytes, bytes]:
     """A vehicle's (8:1: an autopilot's HEARTBEAT, ODOMETRY down) and a controller's (200:191: its HEARTBEAT,
     SET_ACTUATOR_CONTROL_TARGET up) tlogs of a lossless link, as bsst sitl --realtime writes them: 3 ms down,
     5 ms up. ``early_at``: that step's target is stamped received ``early_s`` before it was sent. ``still``: the
-    controller's sequence number stands at 0 (a script that never advances it)."""
+    controller's sequence number stands at 0 (a script that never advances it). ``held``: those steps' targets
+    are received a period and a half late, after the next step's (reordered)."""
     veh = mavlink.MAVLink(None, srcSystem=8, srcComponent=1)
     ctl = mavlink.MAVLink(None, srcSystem=200, srcComponent=191)
     vlog: list[tuple[float, bytes]] = []
@@ -64,7 +67,7 @@ def our_link(steps: int, early_at: int | None = None, early_s: float = 0.0, stil
         target = _frame(ctl, ctl.set_actuator_control_target_encode(k * 4000, 0, 8, 1, [0.1] * 8))
         sent = t + 0.0001 + DOWN_S + 0.0002
         clog.append((sent, target))
-        vlog.append((sent - early_s if k == early_at else sent + UP_S, target))
+        vlog.append((sent - early_s if k == early_at else sent + UP_S + 1.5 * PERIOD_S * (k in held), target))
     return _tlog(vlog), _tlog(clog)
 
 
@@ -190,3 +193,27 @@ def test_a_sessions_step_delays_are_its_per_step_messages_from_its_tlogs(tmp_pat
     got = step_delays(tmp_path)
     assert got is not None and len(got[0]) == len(got[1]) == 100
     assert np.allclose(got[0], UP_S * 1e3, atol=2e-3) and np.allclose(got[1], DOWN_S * 1e3, atol=2e-3)
+
+
+def test_a_killed_sides_link_counts_its_reordered_messages_from_the_tlogs_order(tmp_path: Path) -> None:
+    """A session whose side was killed counts its link from both tlogs (:func:`step_records`, ``cut_counts``):
+    ``reordered`` is each per-step message received after one sent later, in the order the receiver's tlog holds
+    them (the link model's count): two targets held past their successors are 2 up, 0 down, and the ``counted``
+    note says what it counted. Until the third wave's forty-third session it was null, said nowhere."""
+    v, c = our_link(100, held=(10, 40))
+    (tmp_path / "vehicle.tlog").write_bytes(v)
+    (tmp_path / "controller.tlog").write_bytes(c)
+    both = step_records(tmp_path)
+    assert both is not None and (both[0].reordered, both[1].reordered) == (2, 0)
+    assert both[0].sent == both[1].sent == 100 and both[0].lost == 0
+    cut = Cut("vehicle", "killed by SIGKILL", both)
+    up, down = cut_counts("up", cut), cut_counts("down", cut)
+    assert (up["reordered"], up["duplicated"], down["reordered"]) == (2, 0, 0), (up, down)
+    assert "reordered: received after one sent later, in the order the receiver's tlog read them" in up["counted"]
+    assert "link model" not in up["counted"]  # real time: nothing acted after the sockets
+    # in lockstep the vehicle's link model acted on the up link after its socket: these are the sockets' counts
+    said = cut_counts("up", Cut("vehicle", "killed by SIGKILL", both, modelled=True))["counted"]
+    assert said.endswith("counted at the sockets: the link model the vehicle applied after its socket (lockstep) "
+                         "went with its stats, so what that model lost, duplicated or held back is not in these "
+                         "counts"), said
+    assert "link model" not in cut_counts("down", Cut("vehicle", "killed by SIGKILL", both, modelled=True))["counted"]

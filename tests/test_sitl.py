@@ -330,6 +330,18 @@ def test_a_real_time_child_killed_leaves_link_counts_that_add_up_and_says_the_fl
         both = sent & {bytes(m.get_msgbuf()) for m in tlog_messages(run / f"{receiver}.tlog", src, kinds)}
         assert link["delivered"] == len(both) > 200 and link["lost"] >= 0, (d, link)
         assert link["sent"] == link["delivered"] + link["lost"] <= len(sent), (d, link, len(sent))
+        # reordered: each first copy the receiver's tlog holds after one sent later (null until the third wave's
+        # forty-third session), as pymavlink reads the two tlogs
+        order = {b: i for i, b in enumerate(bytes(m.get_msgbuf())
+                                            for m in tlog_messages(run / f"{sender}.tlog", src, kinds))}
+        seen, highest, late = set(), -1, 0
+        for b in (bytes(m.get_msgbuf()) for m in tlog_messages(run / f"{receiver}.tlog", src, kinds)):
+            if b in order and b not in seen:
+                seen.add(b)
+                late += order[b] < highest
+                highest = max(highest, order[b])
+        assert link["reordered"] == late, (d, link, late)
+        assert f" reordered {late} " in out, out
         assert link["counted"].startswith(f"the {side} ended without its stats (killed by SIGKILL): each "), link
         assert f"link {d:4}: sent {link['sent']} delivered {link['delivered']} lost {link['lost']} " in out, out
         assert f"link {d:4}: counted: {link['counted']}" in out, out

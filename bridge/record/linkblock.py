@@ -26,16 +26,21 @@ class Cut:
     """A side that ended without its ``stats`` report (a SIGKILL leaves none; its tlog and half end at their last
     write): ``side`` (``vehicle`` or ``controller``), ``how`` (its exit, as said: ``killed by SIGKILL``) and the
     per-step messages (up: the actuator targets, down: ODOMETRY) as both tlogs show them, up to the last one the two
-    logs both hold (``records``: up, down, :func:`bridge.record.linkextract.step_records`; None: no readable pair)."""
+    logs both hold (``records``: up, down, :func:`bridge.record.linkextract.step_records`; None: no readable pair);
+    ``modelled``: the dead side applied a link model (or a shared radio's turns) to what its socket read (lockstep:
+    the model acts after the socket, in simulation time), so its direction's counts are the sockets', not the
+    model's, which went with its stats."""
 
     side: str
     how: str
     records: tuple[DirectionRecords, DirectionRecords] | None
+    modelled: bool = False
 
 
 def cut_counts(direction: str, cut: Cut) -> dict[str, Any]:
     """One direction's counts where ``cut.side`` left no stats: from both tlogs up to the cut (``counted`` says so),
-    or, without them, null (``unknown`` says why). Before the third wave's forty-second session one side's count
+    or, without them, null (``unknown`` says why; until the third wave's forty-third session ``reordered`` was null
+    even where both tlogs held the order). Before the third wave's forty-second session one side's count
     stood in for the other's: a vehicle killed at 2.2 s read ``up: sent 561 delivered 0 lost 561``, ``down: sent 0
     delivered 567 lost -567``."""
     why = f"the {cut.side} ended without its stats ({cut.how})"
@@ -43,10 +48,15 @@ def cut_counts(direction: str, cut: Cut) -> dict[str, Any]:
         return {"sent": None, "delivered": None, "lost": None, "duplicated": None, "reordered": None,
                 "unknown": f"{why} and the run holds no readable vehicle.tlog and controller.tlog to count from"}
     r = cut.records[0 if direction == "up" else 1]
+    model = ""
+    if cut.modelled and direction == ("up" if cut.side == "vehicle" else "down"):  # its side's model: after the socket
+        model = (f"; counted at the sockets: the link model the {cut.side} applied after its socket (lockstep) went "
+                 f"with its stats, so what that model lost, duplicated or held back is not in these counts")
     return {"sent": r.sent, "delivered": r.sent - r.lost, "lost": r.lost, "duplicated": r.duplicates,
-            "reordered": None,
+            "reordered": r.reordered,
             "counted": f"{why}: each {_SENT[direction]} in both tlogs up to the last one both hold ({cut.side}'s "
-                       f"tlog ends at its last write); those sent after are not counted"}
+                       f"tlog ends at its last write; reordered: received after one sent later, in the order the "
+                       f"receiver's tlog read them); those sent after are not counted{model}"}
 
 
 def link_block(joined: Joined, vehicle: Mapping[str, Any], controller: Mapping[str, Any],

@@ -307,19 +307,25 @@ def _step_records(sent: Sequence[Frame], recv: Sequence[Frame]) -> DirectionReco
     one's own; a second arrival of one is a duplicate): from the first to the last sent that arrived, each one's
     delay, or None where it never did. Not from the gaps in the sequence numbers (:func:`direction_records`): the
     source's other messages share them (counted so, a killed vehicle's first second read 8 of 242 targets lost on
-    loopback)."""
-    out = DirectionRecords()
+    loopback). ``reordered``: those whose first copy was received after one sent later (the receiver's tlog is in
+    the order it read them; the link model's own count, :class:`bridge.link.impairment.LinkStats`)."""
+    out = DirectionRecords(reordered=0)
     waiting: dict[bytes, list[int]] = {}
     for i, f in enumerate(sent):
         waiting.setdefault(f.raw, []).append(i)
     arrival: dict[int, float] = {}
+    highest = -1  # the latest sent of those received so far
     for r in recv:
         left = waiting.get(r.raw)
         if not left:  # received twice, or sent after the sender's log ends (cut short)
             out.duplicates += r.raw in waiting
             out.outside += r.raw not in waiting
             continue
-        arrival[left.pop(0)] = r.t
+        i = left.pop(0)
+        arrival[i] = r.t
+        if i < highest:
+            out.reordered += 1
+        highest = max(highest, i)
     if arrival:
         out.records = [(f.t, arrival[i] - f.t if i in arrival else None)
                        for i, f in enumerate(sent) if min(arrival) <= i <= max(arrival)]

@@ -60,6 +60,7 @@ class DirectionRecords:
     unmatched: int = 0  # received frames the sender never logged, while it logged
     outside: int = 0  # received frames stamped before the sender's log of their source starts or after it ends
     gaps_counted: int = 0  # losses from a sequence gap, their send time spread evenly
+    reordered: int | None = None  # received after one sent later (first copies; None: not counted, as by gaps)
 
     @property
     def sent(self) -> int:
@@ -261,6 +262,8 @@ def merge_directions(parts: Iterable[DirectionRecords]) -> DirectionRecords:
         out.unmatched += p.unmatched
         out.outside += p.outside
         out.gaps_counted += p.gaps_counted
+        if p.reordered is not None:  # (each source's own order: a source's packets against each other)
+            out.reordered = (out.reordered or 0) + p.reordered
     out.records.sort(key=lambda r: r[0])
     return out
 

@@ -460,7 +460,8 @@ class Session:
         dead = next((c for c in (self.vehicle, self.controller) if c is not None and c.name == self.died), None)
         if dead is None or dead.stats:
             return None
-        return Cut(dead.name, dead.exit_text(), step_records(self.path))
+        modelled = not self.realtime and (self.flight.link.impaired or self.radio is not None)
+        return Cut(dead.name, dead.exit_text(), step_records(self.path), modelled)
 
     def _relay_stats(self) -> dict[str, Any] | None:
         """What ``bsst relay --stats`` wrote on exit (None without a relay or a readable file)."""
