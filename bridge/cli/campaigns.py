@@ -137,6 +137,7 @@ def _sweep(args: argparse.Namespace) -> int:
     from bridge.core.interrupt import ignore_sigint  # lazy: start-up time
     from bridge.core.overrides import Overrides  # lazy: start-up time
     from bridge.sweep import AXES, Grid, Sweep, is_sweep_file, load_sweep, run_sweep  # lazy: start-up time
+    from bridge.sweep.campaign import STOPS_HELD  # lazy: start-up time
     from bridge.sweep.grid import LINK_AXES, SHORT, mission_value  # lazy: start-up time
     from missions import load_mission  # lazy: start-up time
 
@@ -198,6 +199,9 @@ def _sweep(args: argparse.Namespace) -> int:
               f"--out {res.path} (it flies them)", file=sys.stderr)
         return EXIT_FAILED
     print(f"sweep directory: {res.path}")
+    if res.stop_held:  # a Ctrl-C that stopped nothing: said, the exit status the whole sweep's (docs/campaigns.md)
+        print(f"bsst sweep: interrupted {STOPS_HELD[res.stop_held]}; nothing is missing: the sweep is whole (its exit "
+              f"status its cells')", file=sys.stderr)
     if res.status == "all failed":
         print(f"bsst sweep: every cell failed ({res.failed} of {len(res.rows)}): nothing was measured; the first "
               f"error: {res.first_error()}", file=sys.stderr)

@@ -108,6 +108,12 @@ def sweep(
 STATUSES = ("ok", "cells failed", "all failed", "interrupted")  # Outcome.status
 
 
+# when a Ctrl-C came that stopped nothing (Outcome.stop_held): the cells flew to their end and the record is whole
+STOPS_HELD = {"flying": "after its last cell was handed out: the cells in flight flew to their end",
+              "writing": "while it wrote its record, every cell flown: the stop was held until cells.csv, sweep.json "
+                         "and the report were whole"}
+
+
 @dataclass
 class Outcome:
     """What :func:`run_sweep` did: all rows (grid order), how many it flew, the directory."""
@@ -123,6 +129,7 @@ class Outcome:
     engine_why: str = ""
     total: int = 0  # the grid's cells (len(rows) below it: interrupted, or a sweep of no rows yet)
     engines: list[str] = field(default_factory=list)  # what flew every row, kept ones too (two: mixed by a resume)
+    stop_held: str = ""  # a Ctrl-C that stopped nothing (the sweep whole): "" none, else when (STOPS_HELD)
 
     @property
     def status(self) -> str:
@@ -216,6 +223,7 @@ def run_sweep(
             if sink is not None:
                 sink.close()
         rows = [results[c.key()] for c in all_cells if c.key() in results]
+        stopped = interrupted
         interrupted = interrupted and len(rows) < len(all_cells)  # a stop after the last cell was handed out: whole
         if len(rows) > reused and used not in engines:
             engines = [*engines, used]
@@ -226,8 +234,10 @@ def run_sweep(
             if report:
                 write_report(path, rows, spec.identity() | {ENGINES: engines}, plots=plots)
         failed = sum(1 for r in rows if r["outcome"] in FAILED)
+    # (read once the block has handled a stop that came in its last lines: sigint_held)
+    stop_held = "" if interrupted else "flying" if stopped else "writing" if held.pending else ""
     return Outcome(rows, len(rows) - reused, reused, failed, path, time.monotonic() - t0, interrupted, used,
-                   used_why, len(all_cells), engines)
+                   used_why, len(all_cells), engines, stop_held)
 
 
 def _lanes(used: str, client: Any, jobs: int) -> int:

@@ -248,11 +248,12 @@ def _socket_tempdir() -> Iterator[None]:
 
 
 def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, report: Report,
-              name: str = "sweep", search: bool = False) -> None:
+              name: str = "sweep") -> None:
     """Fly cells in a local process pool, at most 2 x jobs in flight; ``name``: the command, as a Ctrl-C's line
     names it. After a Ctrl-C the cells in flight end first and are reported (not those a second Ctrl-C stops: a
-    resume flies them). ``search``: one round of a search (``bsst margin``): a Ctrl-C that came after the last
-    cell's wait raises KeyboardInterrupt all the same, so that the search stops there.
+    resume flies them). A Ctrl-C that came after the last cell's wait raises KeyboardInterrupt all the same, so
+    that a search (``bsst margin``) stops there and a sweep knows of it (its cells all flown: whole, and said so;
+    until the third wave's forty-third session a sweep's was taken by nobody after its "interrupted" line).
 
     If a worker process dies (the pool breaks), the cells that were in flight are flown again one at a time in a
     fresh one-worker pool: the one that breaks that one too is an error row, the others get their real result.
@@ -266,7 +267,7 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
                 _fly_alone(mission, suspects.popleft(), mode, report, sigint, name)
                 continue
             _fly_in_pool(mission, queue, suspects, mode, jobs, report, sigint, name)
-        if search and sigint.first.done():  # taken after the last wait: not lost
+        if sigint.first.done():  # taken after the last wait: not lost
             raise KeyboardInterrupt
 
 

@@ -396,7 +396,7 @@ def fly_round(mission: Mission, probes: list[Cell], engine: str, jobs: int | Non
                 raise KeyboardInterrupt
             report(row)
     else:
-        run_local(mission, probes, "offline", jobs or os.cpu_count() or 1, report, name="margin", search=True)
+        run_local(mission, probes, "offline", jobs or os.cpu_count() or 1, report, name="margin")
 
 
 def probe(mission: Mission, law: str, over: str, value: float, seed: int, link: dict[str, float],
