@@ -3,9 +3,10 @@
 ``bsst vehicle`` run alone (docs/sitl.md, "Each side alone") serves until Ctrl-C or SIGTERM; stopped, it says on
 stderr what its flights came to that was not a safe end and exits 1 (a crash, a divergence, a collision, a
 termination, a failsafe its flight never came back from), as ``bsst controller`` alone says what it knows
-(bridge.record.asked); a clean stop of a vehicle whose flights ended well exits 0, nothing said. Real processes:
-``bsst vehicle`` and ``bsst controller`` over UDP on 127.0.0.1; the stop a real SIGINT, sent once the vehicle has
-reported the event the case waits for.
+(bridge.record.asked); a clean stop of a vehicle whose flights ended well exits 0, nothing said. A real-time
+``bsst controller`` alone ends once its vehicle's failsafe has disarmed it (bridge.nodes.offboard.flight). Real
+processes: ``bsst vehicle`` and ``bsst controller`` over UDP on 127.0.0.1; the stop a real SIGINT, sent once the
+vehicle has reported the event the case waits for.
 """
 
 from __future__ import annotations
@@ -18,7 +19,8 @@ import pytest
 
 from bridge.autopilot.modes import OFFBOARD
 from bridge.autopilot.vehicleevents import Event
-from bridge.nodes.report import Ready
+from bridge.nodes.report import Event as ReportedEvent
+from bridge.nodes.report import Ready, parse_line
 from bridge.nodes.vehicle.verdict import flights_not_ended_well
 from bridge.session import instance_slot
 from tests.sitlkit import ENV, ROOT, Proc, run_bsst
@@ -85,6 +87,43 @@ def test_a_vehicle_alone_whose_flight_ended_in_its_failsafe_says_so_and_exits_1(
     assert status == 1 and len(said) == 1, vehicle.lines[-5:]
     assert said[0].startswith("bsst vehicle: failsafe at t=") and said[0].endswith(
         ": its flight ended in it (no arm, no mode selected, took it back)"), said
+
+
+# the x500 on its pack, read empty 1 s in: its battery failsafe lands it (COM_LOW_BAT_ACT 2) and disarms it 0.5 s
+# after the touchdown, some 29 s before the mission's end
+EMPTIED = ('name = "emptied"\nduration_s = 30.0\nprofile = "x500"\n[trajectory]\nkind = "sine"\n[effects]\n'
+           'battery = true\n[params]\nCOM_LOW_BAT_ACT = 2\nCOM_DISARM_LAND = 0.5\n'
+           '[[events]]\nt_s = 1.0\nkind = "battery"\nstate = "empty"\n')
+
+
+def test_a_real_time_controller_alone_ends_once_the_vehicles_failsafe_has_disarmed_it(tmp_path: Path) -> None:
+    """``bsst vehicle --realtime`` and ``bsst controller --realtime`` alone, a 30 s mission whose battery failsafe
+    lands and disarms the vehicle ~2.5 s in: nothing is left to fly, so the controller ends within seconds of the
+    vehicle's disarm (its own failsafe event, the ``bsst controller: failsafe: ...`` line naming when, exit 1),
+    not at the mission's end. Until the third wave's forty-third session it waited out the other ~27 s of the
+    mission's ticks (and ``bsst sitl --realtime`` waited for it: 20.7 s for such a 20 s mission, now 3.7 s)."""
+    mission = tmp_path / "emptied.toml"
+    mission.write_text(EMPTIED)
+    with instance_slot() as n:
+        vehicle = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), "--gcs", "none", cwd=ROOT)
+        ctl = None
+        try:
+            vehicle.wait_report(Ready, timeout=60)
+            ctl = Proc.bsst("controller", str(mission), "--realtime", "--instance", str(n), cwd=ROOT)
+            vehicle.wait_event(lambda e: e.startswith("disarmed: "), timeout=60)
+            status = ctl.p.wait(timeout=10)  # (the mission's end is ~27 s away)
+        finally:
+            if ctl is not None:
+                ctl.stop()
+            vehicle.stop()
+    said = [ln for ln in ctl.lines if ln.startswith("bsst controller: ")]
+    assert status == 1 and said[0].startswith("bsst controller: failsafe: the vehicle's failsafe took over ("), said
+    assert said[1].startswith("bsst controller: the vehicle's failsafe disarmed it by t=") and said[1].endswith(
+        " s of the mission's 30 s, no [failsafe] resume to arm it again: nothing left to fly, so the controller "
+        "ended there (not flown as asked)"), said
+    # its word stamped when the failsafe took over (the vehicle's EVENT), as at a mission's end
+    [took] = [r.t for r in map(parse_line, ctl.lines) if isinstance(r, ReportedEvent) and r.kind == "failsafe"]
+    assert 1.0 <= took < 1.1, took
 
 
 def test_a_failsafe_the_flight_came_back_from_is_no_end_a_plant_end_always_is() -> None:

@@ -35,7 +35,7 @@ class EndFlying(RealtimeFlying):
     vehicle_silent: bool
     _end_usec: int | None  # lockstep: the stamp of the state that ended the mission, unanswered
     _end_height_m: float
-    _mission_zero: float | None  # the vehicle's clock (s) at mission time 0, known at the mission's end
+    _mission_zero: float | None  # the vehicle's clock (s) at mission time 0 (real time: from its start; else its end)
     _mission_end: float  # mission time (s) the mission's steps ended
 
     def _fly_end(self) -> str:

@@ -87,6 +87,7 @@ class Offboard(EndFlying):
         self._end_usec: int | None = None  # lockstep: the stamp of the state that ended the mission, unanswered
         self._end_height_m = 0.0
         self._mission_zero: float | None = None
+        self.disarmed_early: float | None = None  # real time: the mission time its failsafe's disarm ended the flight
         self._mission_end = math.inf
         self.end_unanswered: dict[str, Any] | None = None  # the end action not seen taken (its summary ``end``)
         self._end_ask_until: float | None = None  # real time: until when the vehicle is asked how its flight ended
@@ -328,6 +329,28 @@ class Offboard(EndFlying):
             self._end_lockstep_flight()
         return "failsafe"
 
+    def _failsafe_disarmed(self) -> bool:
+        """Real time, in the mission: whether the vehicle's failsafe has disarmed it (landed, or its ``disarm``
+        action) with no ``[failsafe] resume`` to arm it again: nothing is left to fly. (Lockstep clocks the mission's
+        steps to its end, as offline: :meth:`_end_of_mission`.)"""
+        return (self.cfg.clock == "realtime" and self.armed_seen and not self.vehicle_armed and bool(self.failsafe_seen)
+                and not self.flight.failsafe.resume and not self.ending)
+
+    def _end_failsafe_disarmed(self) -> str:
+        """Real time: the vehicle's failsafe disarmed it in the mission (:meth:`_failsafe_disarmed`): the flight ends
+        now, ``failsafe`` (not flown as asked, exit 1), said as at the mission's end (:meth:`_end_of_mission`) and
+        when (:attr:`disarmed_early`), rather than after the rest of the mission's ticks, each answered with nothing
+        (until the third wave's forty-third session ``bsst controller`` alone waited them out: 17 s of a 20 s
+        mission its battery failsafe landed at 3 s; ``bsst sitl`` waited for it)."""
+        self._settle_events()  # its failsafe's EVENT, missed, asked for again: when it took over
+        self._at_end_now()
+        took = math.nan if self.failsafe_at is None or self._mission_zero is None else \
+            self.failsafe_at - self._mission_zero
+        self.reason = f"the vehicle's failsafe took over ({self.failsafe_seen.value})"
+        self.event("failsafe", self.reason, answers=("failsafe",), t=took)
+        self.disarmed_early = self.t_mission
+        return "failsafe"
+
     def _resting(self) -> bool:
         """Lockstep: whether the vehicle's failsafe has landed it (its EVENT LANDED since its latest FAILSAFE's), on
         the step clock still: on the ground, motors off, it only waits out COM_DISARM_LAND (> 0). Not in a fleet (its
@@ -383,7 +406,8 @@ class Offboard(EndFlying):
     def _check_vehicle(self, at_end: bool = False) -> str | None:
         """The outcome if the vehicle is lost to the flight (silent, no more states, disarmed
         other than by its failsafe, its flight ended by its plant, taken out of OFFBOARD by a ground
-        station), else None. Its failsafe alone does not end the flight. ``at_end``: the mission's time is flown (None
+        station; real time, disarmed by its failsafe with no ``resume``: :meth:`_failsafe_disarmed`), else None. Its
+        failsafe alone does not end the flight. ``at_end``: the mission's time is flown (None
         is then ``completed``: the vehicle is not asked for its word, :meth:`_word_awaited`, which is for its end)."""
         now = time.monotonic()
         timeout = self._silence_s
@@ -408,6 +432,8 @@ class Offboard(EndFlying):
             if (not at_end and self._word_awaited()) or self.events_awaited():  # a missed EVENT: its failsafe's?
                 return None
             self.reason, answers = "the vehicle was disarmed during the mission", ("disarmed",)
+        elif not at_end and self._failsafe_disarmed():
+            return self._end_failsafe_disarmed()
         elif now - self._last_state > (wait := self._state_wait_s if self._started else
                                        self.cfg.start_timeout_s or self._state_wait_s):
             if not at_end and self.armed_seen and self._last_rx > self._last_state and self._word_awaited():

@@ -42,6 +42,7 @@ class RealtimeFlying(OffboardLink):
     _way_down: float | None  # the states' way down (s)
     way_down: dict[str, float] | None  # that in ms and how far off it may be (stats)
     _last_state: float  # wall time of the newest state flown
+    _mission_zero: float | None  # the vehicle's clock (s) at mission time 0
 
     def _observe(self, odo: Any, t_state: float, recv: float) -> None:
         raise NotImplementedError  # the flight's: Offboard._observe
@@ -65,6 +66,7 @@ class RealtimeFlying(OffboardLink):
         if isinstance(locked, str):
             return locked
         phase, k0 = locked
+        self._mission_zero = k0 * period  # the vehicle's clock at mission time 0 (s): its events on the mission's
         self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
         last_k = k0 - 1
         usec, recv = 0, math.nan  # the newest state's stamp and arrival
@@ -115,6 +117,7 @@ class RealtimeFlying(OffboardLink):
                     self.schedule = clock = FixedRate(due + (k - k0 - j) * period, rate, clock.skipped)
                     woke += (k - k0 - j) * period  # the schedule moved, not the process: no stall at the next tick
                     k0, j = k, 0
+                    self._mission_zero = k0 * period
                     self.stalls_waiting.note(*stall)  # met before the mission's first state came: not its stall
                 elif last_k < k0:
                     self.stalls.note(*stall)  # the mission's first tick, its state the first one's: judged

@@ -73,6 +73,10 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
               node.vehicle_silent))
     if outcome != "completed":
         sys.stderr.write(f"bsst controller: {outcome}" + (f": {node.reason}" if node.reason else "") + "\n")
+        if node.disarmed_early is not None:  # (real time: it ended there, not at the mission's end)
+            sys.stderr.write(f"bsst controller: the vehicle's failsafe disarmed it by t={node.disarmed_early:.3f} s of "
+                             f"the mission's {flight.mission.duration_s:g} s, no [failsafe] resume to arm it again: "
+                             f"nothing left to fly, so the controller ended there (not flown as asked)\n")
         sys.stderr.writelines(f"bsst controller: the vehicle warned: {text}\n" for text in warned)
     elif left:
         sys.stderr.write(f"bsst controller: completed, but not in lockstep: said by {node.left_lockstep}\n")
