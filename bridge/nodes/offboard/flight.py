@@ -333,16 +333,20 @@ class Offboard(EndFlying):
         """Real time, in the mission: whether the vehicle's failsafe has disarmed it (landed, or its ``disarm``
         action) with no ``[failsafe] resume`` to arm it again: nothing is left to fly. (Lockstep clocks the mission's
         steps to its end, as offline: :meth:`_end_of_mission`.)"""
-        return (self.cfg.clock == "realtime" and self.armed_seen and not self.vehicle_armed and bool(self.failsafe_seen)
-                and not self.flight.failsafe.resume and not self.ending)
+        return (self.cfg.clock == "realtime" and self.armed_seen and not self.vehicle_armed and not self.ending
+                and self.failsafe_seen not in (FailsafeSign.NONE, FailsafeSign.EMERGENCY)
+                and not self.flight.failsafe.resume)
 
-    def _end_failsafe_disarmed(self) -> str:
+    def _end_failsafe_disarmed(self) -> str | None:
         """Real time: the vehicle's failsafe disarmed it in the mission (:meth:`_failsafe_disarmed`): the flight ends
         now, ``failsafe`` (not flown as asked, exit 1), said as at the mission's end (:meth:`_end_of_mission`) and
         when (:attr:`disarmed_early`), rather than after the rest of the mission's ticks, each answered with nothing
         (until the third wave's forty-third session ``bsst controller`` alone waited them out: 17 s of a 20 s
-        mission its battery failsafe landed at 3 s; ``bsst sitl`` waited for it)."""
+        mission its battery failsafe landed at 3 s; ``bsst sitl`` waited for it). None when an EVENT asked for again
+        says its plant ended the flight (crashed, terminated: :meth:`_check_vehicle` names it next)."""
         self._settle_events()  # its failsafe's EVENT, missed, asked for again: when it took over
+        if self.plant_end:
+            return None
         self._at_end_now()
         took = math.nan if self.failsafe_at is None or self._mission_zero is None else \
             self.failsafe_at - self._mission_zero
