@@ -274,7 +274,8 @@ def table_where(source: str, e: TimedEvent) -> str:
 # the devices the timeline sets to a state, each with the state it starts every flight in: the GPS and the compass
 # on, each rotor whole (effectiveness 1), the barometer not drifting (0 m/s)
 _DEVICE_START = {"gps": "on", "mag": "on", "battery": "ok", "motor": 1.0, "baro": 0.0}
-_DEVICE_NAMES = {"gps": "the GPS", "mag": "the compass", "battery": "the battery", "baro": "the barometer"}
+_DEVICE_NAMES = {"gps": "the GPS", "mag": "the compass", "battery": "the battery", "baro": "the barometer",
+                 "wind": "the steady wind", "link": "the link"}
 # the devices an event switches off or on: one that leaves it as it is was meant the other way (a rotor's or the
 # barometer's value is a level: its baseline, 1 or 0, is a value a scripted series of flights gives too)
 _SWITCHES = ("gps", "mag", "battery")
@@ -306,11 +307,13 @@ def check_state_changes(timeline: Sequence[TimedEvent], rate_hz: float, source: 
     flag that gave it) for an event of ``timeline`` (in time order) that switches the GPS, the compass or the
     battery to the state it is already in at that time, from the start or from the event before (``gps:on`` with
     no ``gps:off`` before it, two ``gps:off`` with no ``gps:on`` between), or one that sets a device (those, a rotor's
-    effectiveness, the barometer's drift) another event sets at the same control step of ``rate_hz`` (Hz), where
-    only the order given would say which one holds."""
+    effectiveness, the barometer's drift, the steady wind, the link) another event sets at the same control step of
+    ``rate_hz`` (Hz), where only the order given would say which one holds."""
     last: dict[tuple[Any, ...], TimedEvent] = {}  # device -> the event that last set it
     for e in timeline:
         sets = device_set(e)
+        if sets is None and e.kind in ("wind", "link"):  # the steady wind, the link: replaced whole, so two at one
+            sets = (e.kind,), None                        # step race (never "already": not a switch)
         if sets is None:
             continue
         device, state = sets
@@ -320,8 +323,9 @@ def check_state_changes(timeline: Sequence[TimedEvent], rate_hz: float, source: 
                                 f"{_device_name(device)} at the control step at {e.step(rate_hz) / rate_hz:g} s "
                                 f"({rate_hz:g} Hz), so which one holds is ambiguous: give one, or times a step "
                                 f"({1.0 / rate_hz:g} s) apart", table_where(source, e))
-        was = _DEVICE_START[device[0]] if before is None else device_set(before)[1]  # type: ignore[index]
-        if state == was and device[0] in _SWITCHES:
+        was = None if device[0] not in _SWITCHES else \
+            _DEVICE_START[device[0]] if before is None else device_set(before)[1]  # type: ignore[index]
+        if was is not None and state == was:
             since = "as every flight starts" if before is None else f"since {before.text()} at {before.t_s:g} s"
             raise EventError(e, f"{_already(device, state)} at {e.t_s:g} s ({since}): the event would change "
                                 "nothing", table_where(source, e))

@@ -106,6 +106,10 @@ SAME_STEP = [  # (--at flags, the one refused, why): two events setting one devi
                                                "step at 10 s (250 Hz), so which one holds is ambiguous"),
     (("10.001:gps:off", "10.003:gps:on"), "10.003:gps:on", "both set the GPS at the control step at 10.004 s"),
     (("10:mag:off", "10:mag:off"), "10:mag:off", "both set the compass at the control step at 10 s"),
+    # a steady wind or a link replaced twice at one step (both were flown, the later given held: a user's tour)
+    (("10:wind:3", "10:wind:4:90"), "10:wind:4:90", "steady wind 3 m/s from 0 deg at 10 s and steady wind 4 m/s "
+                                                    "from 90 deg at 10 s both set the steady wind at the control step"),
+    (("10.001:link:lte", "10.003:link:wifi"), "10.003:link:wifi", "both set the link at the control step at 10.004 s"),
 ]
 
 
@@ -132,6 +136,9 @@ def test_events_that_change_something_are_flown_as_before() -> None:
     for at in (("10:motor:1=0", "12:motor:1=0"), ("10:motor:2=1",)):
         assert len(prepare("missions/sine.toml", profile="x500", at=at).timeline) == len(at)
     assert len(prepare("missions/sine.toml", at=("2:baro:drift=0",), **GNSS_EKF).timeline) == 1
+    # a steady wind or a link a step apart, or the same again later: taken (neither is a switch)
+    for at in (("10:wind:3", "10.004:wind:3"), ("10:link:lte", "10.004:link:wifi", "12:link:wifi")):
+        assert len(prepare("missions/sine.toml", at=at).timeline) == len(at)
     with pytest.raises(ConfigError, match=r"^--at 10:motor:1=0.5: .* both set motor 1 at the control step at 10 s"):
         prepare("missions/sine.toml", profile="x500", at=("10:motor:1=1", "10:motor:1=0.5"))
 
