@@ -254,11 +254,17 @@ def event_given(raw: Mapping[str, Any], source: str, prefix: str, duration_s: fl
         flagged = event_table_from_flag(text)
     except ValueError as exc:
         raise t.error(AT_KEY, f"not an --at flag's T:KIND[:ARGS] nor a place in at= (at[0]): {exc}"[:300]) from None
-    if own != flagged:  # (a hand-edited table: what it flies is not what the flag it names would)
+    if own.keys() != flagged.keys() or not all(_same(own[k], v) for k, v in flagged.items()):  # (a hand-edited
+        # table: what it flies is not what the flag it names would)
         raise t.error(AT_KEY, f"the table is not the event --at {text} lays "
                               f"({', '.join(f'{k} = {v!r}' for k, v in flagged.items())}): give the flag's "
                               f"values, or drop {AT_KEY} (the table is then the mission's own)"[:300])
     return replace(event_from_table(Table(own, f"--at {text}"), duration_s), at=text)
+
+
+def _same(a: Any, b: Any) -> bool:
+    """``a == b``, a NaN the same as a NaN (a flag's ``nan``, refused by the ranges, not as a hand edit)."""
+    return a == b or (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b))
 
 
 def table_where(source: str, e: TimedEvent) -> str:

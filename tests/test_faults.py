@@ -218,6 +218,9 @@ def test_a_gusts_numbers_have_one_range_and_one_text_wherever_given(tmp_path, gu
     ("10:gps:jump=0,2e4,0", "jump: element 1 must be in [-10000, 10000] m, got 20000"),
     ("10:wind:60", "speed_mps: must be in [0, 50] m/s, got 60"),
     ("10:motor:1=2", "effectiveness: must be in [0, 1], got 2"),
+    # a nan the flag's own: refused by its range, not as a hand-edited table (`at: the table is not the event ...`)
+    ("nan:wind:3", "t_s: must be finite, got nan"),
+    ("10:link:delay_ms=nan", "link.delay_ms: must be finite, got nan"),
 ])
 def test_every_event_number_says_its_range_with_its_unit(flag, says) -> None:
     with pytest.raises(ConfigError, match=rf"^--at {flag}: {re.escape(says)}$"):
