@@ -199,7 +199,8 @@ def fleet_flights(m: Mission, over: Overrides, laid_named: bool = False) -> list
         try:
             flights.append(prepare(mission_of(m, v), Overrides.of(given), laid_named=laid_named))
         except ConfigError as exc:
-            raise ConfigError(f"{exc} (vehicle {v.id})"[:400]) from None
+            moved = f", moved by ({', '.join(f'{c:g}' for c in v.offset)}) m" if any(v.offset) else ""
+            raise ConfigError(f"{exc} (vehicle {v.id}{moved})"[:400]) from None
     return flights
 
 

@@ -189,6 +189,13 @@ def formation(n: int, text: str, flag: str = "--formation") -> tuple[VehicleSpec
         offsets = [((i // cols) * d, (i % cols) * d, 0.0) for i in range(n)]
     else:
         offsets = [(d * math.cos(2 * math.pi * i / n), d * math.sin(2 * math.pi * i / n), 0.0) for i in range(n)]
+    lo, hi = FLEET_RANGES["offset"]
+    far = next(((i, a, c) for i, o in enumerate(offsets) for a, c in zip("xy", o) if not lo <= c <= hi), None)
+    if far is not None:  # (named as the flag: the mission's file has no vehicles[i] to name)
+        i, axis, c = far
+        size = "radius" if kind == "circle" else "spacing"
+        raise ConfigError(f"{flag} {text}: vehicle {i + 1} would be moved {c:g} m along {axis}, past the "
+                          f"[{lo:g}, {hi:g}] m an offset may be: give a smaller {size} or fewer vehicles"[:300])
     return tuple(VehicleSpec(i + 1, tuple(round(c, 12) + 0.0 for c in o)) for i, o in enumerate(offsets))  # type: ignore[misc]
 
 

@@ -114,6 +114,18 @@ def test_a_bad_formation_names_the_flag(text: str, words: str) -> None:
     assert str(exc.value).startswith(f"--formation {text}: ") and words in str(exc.value)
 
 
+@pytest.mark.parametrize("n, text, words", [
+    (3, "line:600", "vehicle 3 would be moved 1200 m along y, past the [-1000, 1000] m an offset may be"),
+    (40, "grid:200", "vehicle 7 would be moved 1200 m along y"),
+])
+def test_a_formation_past_the_offsets_range_names_the_flag(n: int, text: str, words: str) -> None:
+    """It named the mission's file and a table it does not have (``sine.toml: vehicles[2].offset: element 1 must be
+    in [-1000, 1000], got 1200``): a user's tour."""
+    with pytest.raises(ConfigError) as exc:
+        formation(n, text)
+    assert str(exc.value).startswith(f"--formation {text}: {words}"), exc.value
+
+
 @pytest.mark.parametrize("n", [0, 65, True])
 def test_a_bad_vehicle_count_names_the_flag(n: object) -> None:
     with pytest.raises(ConfigError, match=r"^--vehicles .*: must be a whole number in \[1, 64\]"):

@@ -330,7 +330,10 @@ def test_the_fleets_mission_toml_is_the_mission_as_flown(tmp_path: Path) -> None
 
 
 def test_a_formation_reaching_past_the_envelope_names_the_first_vehicle_outside(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match=r"outside the plant's envelope of 100 m .*\(vehicle 51\)$"):
+    """By its id and its offset: the refusal names the mission's trajectory (``trajectory.amplitude: amplitude 101
+    m``), which the offset moved (it said ``(vehicle 51)`` alone: a user's tour)."""
+    with pytest.raises(ConfigError, match=r"outside the plant's envelope of 100 m .*"
+                                          r"\(vehicle 51, moved by \(0, 100, 0\) m\)$"):
         simulate("missions/sine.toml", vehicles=60, formation="line:2", out=tmp_path / "r")
     assert not (tmp_path / "r").exists()
 
