@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from missions.geodetic import Home, onto_bound
-from params import ConfigError, Table, finite_float, show
+from params import ConfigError, Table, finite_float, json_show, show
 
 MAX_ZONES = 100
 MAX_POINTS = 1000  # a polygon's vertices (QGroundControl draws a handful)
@@ -138,6 +138,18 @@ def _point(z: Table, key: str, i: int, p: Any) -> tuple[float, float]:
     return xy[0], xy[1]  # type: ignore[return-value]
 
 
+def plan_object_keys(raw: Mapping[str, Any], source: str, name: str, keys: tuple[str, ...]) -> None:
+    """Refuse a plan's ``name`` object (``geoFence``, ``rallyPoints``) of a ``version`` other than QGroundControl's 2,
+    or with a key not in ``keys``: either was read as no zones or no points, and flown without them."""
+    v = raw.get("version", 2)
+    if isinstance(v, bool) or v != 2:
+        raise ConfigError(f"{source}: {name}.version: version {json_show(v)} not supported (2 is, as QGroundControl "
+                          "writes it)"[:300])
+    unknown = sorted(str(k) for k in raw if k not in keys)
+    if unknown:
+        raise ConfigError(f"{source}: {name}.{unknown[0]}: unknown key; {name} has {', '.join(keys)}"[:300])
+
+
 def geofence_from_plan(raw: Any, home: Home, source: str) -> Geofence | None:
     """The fence of a plan's ``geoFence`` object about ``home`` (None: no zones; a malformed one is a
     ConfigError naming the file and the key)."""
@@ -145,6 +157,7 @@ def geofence_from_plan(raw: Any, home: Home, source: str) -> Geofence | None:
         return None
     if not isinstance(raw, Mapping):
         raise ConfigError(f"{source}: geoFence: expected an object")
+    plan_object_keys(raw, source, "geoFence", ("version", "polygons", "circles", "breachReturn"))
     zones: list[Zone] = []
     for key in ("polygons", "circles"):
         items = raw.get(key, [])

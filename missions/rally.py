@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from missions.geodetic import Home, onto_bound
+from missions.geofence import plan_object_keys
 from params import ConfigError, Table, finite_float, json_show, show
 
 MAX_RALLY = 100  # points; QGroundControl plans hold a handful
@@ -48,6 +49,7 @@ def rally_from_plan(raw: Any, home: Home, source: str, radius_m: float) -> tuple
         return ()
     if not isinstance(raw, Mapping) or not isinstance(raw.get("points", []), list):
         raise ConfigError(f"{source}: rallyPoints: expected an object with points [[lat, lon, alt], ...]")
+    plan_object_keys(raw, source, "rallyPoints", ("version", "points"))
     local = []
     for i, p in enumerate(raw.get("points", [])):
         lat, lon, alt = (finite_float(v) for v in p) if isinstance(p, list) and len(p) == 3 else (None,) * 3

@@ -162,6 +162,14 @@ def test_a_slower_cruise_is_a_longer_flight() -> None:
     (lambda d: d["mission"]["items"][1].update(command=None), ["got null and"]),  # JSON's word (it said None)
     (lambda d: d["mission"].update(plannedHomePosition=None), ["plannedHomePosition", "got null"]),
     (lambda d: d["mission"].update(version="2"), ['mission.version: expected the number 2, got the string "2"']),
+    # a fence or rally points under a mistyped key or another version: refused (they flew none, exit 0: a user's tour)
+    (lambda d: d.update(geoFence={"version": 2, "polygons": [], "circels": [{"inclusion": True, "circle": {
+        "center": [47.397742, 8.545594], "radius": 5}}]}), ["geoFence.circels: unknown key; geoFence has version, "
+                                                           "polygons, circles, breachReturn"]),
+    (lambda d: d.update(geoFence={"version": 1, "polygon": [[47.3977, 8.5455], [47.3978, 8.5455], [47.3978, 8.5456]]}),
+     ["geoFence.version: version 1 not supported (2 is, as QGroundControl writes it)"]),
+    (lambda d: d.update(rallyPoints={"version": 2, "point": [[47.3978, 8.5456, 490]]}), ["rallyPoints.point: unknown"]),
+    (lambda d: d.update(rallyPoints={"version": 3, "points": []}), ["rallyPoints.version: version 3 not supported"]),
 ])
 def test_refusals_name_the_file_the_item_and_its_command(tmp_path: Path, edit, words: list[str]) -> None:
     p = write_plan(tmp_path, edit)
