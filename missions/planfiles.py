@@ -20,6 +20,7 @@ the run, held by the vehicle, which acts on a breach by GF_ACTION); its rally po
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 from dataclasses import dataclass
@@ -113,6 +114,23 @@ def _number(v: Any) -> float:
     return f
 
 
+_PLAN_KEYS = ("fileType", "version", "groundStation", "mission", "geoFence", "rallyPoints")
+_MISSION_KEYS = ("version", "firmwareType", "vehicleType", "cruiseSpeed", "hoverSpeed", "plannedHomePosition", "items",
+                 "globalPlanAltitudeMode")
+
+
+def _near_misses(source: str, obj: dict[str, Any], keys: tuple[str, ...], prefix: str) -> None:
+    """Refuse a key of ``obj`` that is not one of ``keys`` but close to one (``geofence``, ``hoverspeed``): the one
+    meant was read as not given (no fence, the default speed). Other keys are a tool's own, left alone as
+    QGroundControl leaves them."""
+    for k in obj:
+        if isinstance(k, str) and k not in keys:
+            near = difflib.get_close_matches(k.lower(), [c.lower() for c in keys], n=1, cutoff=0.8)
+            if near:
+                meant = next(c for c in keys if c.lower() == near[0])
+                raise ConfigError(f"{source}: {prefix}{k[:40]}: unknown key; did you mean {meant!r}?")
+
+
 def _version(source: str, key: str, v: Any, want: int) -> None:
     """Refuse a file format version (``version``, ``mission.version``) other than the number ``want``."""
     if isinstance(v, bool) or not isinstance(v, (int, float)):
@@ -180,10 +198,12 @@ def read_qgc_plan(text: str, source: str) -> PlanFile:
     if not isinstance(data, dict) or data.get("fileType") != "Plan":
         raise ConfigError(f"{source}: not a QGroundControl plan (fileType must be \"Plan\")")
     _version(source, "version", data.get("version"), 1)
+    _near_misses(source, data, _PLAN_KEYS, "")
     mission = data.get("mission")
     if not isinstance(mission, dict):
         raise ConfigError(f"{source}: mission: expected an object")
     _version(source, "mission.version", mission.get("version"), 2)
+    _near_misses(source, mission, _MISSION_KEYS, "mission.")
     home = mission.get("plannedHomePosition")
     try:
         lat, lon, alt = (_number(v) for v in home)  # type: ignore[union-attr]

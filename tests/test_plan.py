@@ -170,6 +170,10 @@ def test_a_slower_cruise_is_a_longer_flight() -> None:
      ["geoFence.version: version 1 not supported (2 is, as QGroundControl writes it)"]),
     (lambda d: d.update(rallyPoints={"version": 2, "point": [[47.3978, 8.5456, 490]]}), ["rallyPoints.point: unknown"]),
     (lambda d: d.update(rallyPoints={"version": 3, "points": []}), ["rallyPoints.version: version 3 not supported"]),
+    # a plan's or its mission's key mistyped: refused (the one meant was not given: no fence, the default speed)
+    (lambda d: d.update(geofence=d.pop("geoFence")), ["geofence: unknown key; did you mean 'geoFence'?"]),
+    (lambda d: d["mission"].update(hoverspeed=d["mission"].pop("hoverSpeed")),
+     ["mission.hoverspeed: unknown key; did you mean 'hoverSpeed'?"]),
 ])
 def test_refusals_name_the_file_the_item_and_its_command(tmp_path: Path, edit, words: list[str]) -> None:
     p = write_plan(tmp_path, edit)
