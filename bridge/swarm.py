@@ -396,7 +396,8 @@ def sitl(mission: Mission | str | Path | None, *, vehicles: int | Sequence[Any] 
     m = mission if isinstance(mission, Mission) or mission is None else None
     if await_mission or mission is None:  # a ground station's mission (bsst sitl --await-mission): one vehicle
         if vehicles is not None or formation is not None:
-            raise ConfigError("--vehicles with --await-mission: a ground station's mission flies one vehicle")
+            flag = f"--vehicles {vehicles}" if vehicles is not None else f"--formation {formation}"
+            raise ConfigError(f"{flag} with --await-mission: a ground station's mission flies one vehicle"[:300])
         fleet = None
     else:
         if m is None:  # loaded once: the session flies this one

@@ -259,8 +259,11 @@ def test_a_vehicle_killed_or_frozen_in_flight_is_dropped_and_the_other_flies_on(
 
 
 def test_a_fleet_awaiting_a_ground_stations_mission_is_refused() -> None:
-    with pytest.raises(ConfigError, match="--vehicles with --await-mission"):
+    """Named by the flag given: ``--formation line:2`` alone was said as ``--vehicles`` (a user's tour)."""
+    with pytest.raises(ConfigError, match="^--vehicles 2 with --await-mission"):
         sitl(None, vehicles=2, await_mission=True)
+    with pytest.raises(ConfigError, match="^--formation line:2 with --await-mission: a ground station's mission flies"):
+        sitl(None, formation="line:2", await_mission=True)
 
 
 def _from(gcs: Any, kind: str, sysid: int, fleet: Bsst) -> Any:
