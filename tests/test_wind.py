@@ -193,6 +193,15 @@ def test_wind_refusals_say_the_unit_and_the_gust_shapes(tmp_path) -> None:
         with pytest.raises(ConfigError) as refused:
             simulate(sine, wind=wind)
         assert str(refused.value) == f"overrides: {said}", str(refused.value)  # not the file's (third wave, 40th)
+    # turbulence= and turbulence_scaling= by their own names: they were the file's (`sine.toml: wind.turbulence: ...`,
+    # a key it does not have: a user's tour)
+    for given, said in (({"turbulence": "extreme"}, "turbulence: must be one of none, light, moderate, severe; got "
+                                                    "'extreme'"),
+                        ({"turbulence": "light", "turbulence_scaling": "free"},
+                         "turbulence_scaling: must be one of exact, none; got 'free'")):
+        with pytest.raises(ConfigError) as refused:
+            simulate(sine, **given)
+        assert str(refused.value) == f"overrides: {said}", str(refused.value)
 
 
 def test_the_printed_summary_names_the_air_flown(tmp_path) -> None:

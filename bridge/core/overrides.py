@@ -26,6 +26,7 @@ from missions.mission import law_spec_from
 from params import ConfigError
 from params.text import shown_name
 from plant.events import AT_KEY, event_given, event_table_from_flag
+from plant.wind import SCALING, TURBULENCE
 
 
 def _not_alone(name: str, value: object, one: tuple[type, ...], what: str) -> None:
@@ -76,6 +77,10 @@ class Overrides:
         _check_type("turbulence", self.turbulence, str, "a string")
         _check_type("scatter_m", self.scatter_m, (int, float), "a number (m)")
         _check_type("turbulence_scaling", self.turbulence_scaling, str, "a string")
+        for name, value, allowed in (("turbulence", self.turbulence, TURBULENCE),
+                                     ("turbulence_scaling", self.turbulence_scaling, SCALING)):
+            if value is not None and value not in allowed:  # (named as given, not as the mission's [wind] key)
+                raise ConfigError(f"overrides: {name}: must be one of {', '.join(allowed)}; got {value!r}"[:200])
         w = self.wind
         if isinstance(w, (int, float)) and not isinstance(w, bool):
             object.__setattr__(self, "wind", {"speed_mps": float(w)})
