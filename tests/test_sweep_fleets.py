@@ -87,3 +87,12 @@ def test_fleet_cells_that_cannot_fly_are_refused_before_any_cell(tmp_path: Path,
     assert main(["sweep", str(short_sine(tmp_path)), "--vehicles", "1,2.5"]) == 2
     err = capsys.readouterr().err
     assert "--vehicles: expected whole numbers of vehicles, got '1,2.5'" in err and err.count("\n") == 1
+    # a mission with its own [[vehicles]]: said once, with where fleets are swept (it was said as the first cell's,
+    # `sweep cell (controller=bsst ... vehicles=2 seed=0): ...: sweeps ... fly one vehicle`, cut before its end)
+    near_miss = MISSION_DIR.parent / "examples" / "swarm-near-miss.toml"
+    assert main(["sweep", str(near_miss), "--delay", "0,10", "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"bsst: {near_miss}: vehicles: a mission of several vehicles ([[vehicles]]) is not a sweep's cell: "
+                   "a sweep lays fleets out itself (--vehicles N,... on a mission without [[vehicles]]); bsst margin, "
+                   "vehicle and controller fly one vehicle\n"), err
+    assert not (tmp_path / "s").exists()

@@ -183,6 +183,11 @@ def _blackouts_given(m: Mission, over: Overrides, d: str) -> str:
     return f"{prof.path}: {key_in(prof.link) or 'link.blackouts'} (the flight's link profile)"
 
 
+# where else a fleet flies, said where a [[vehicles]] mission is refused (a sweep's axis lays its own fleets)
+FLEETS_ELSEWHERE = ("a sweep lays fleets out itself (--vehicles N,... on a mission without [[vehicles]]); bsst "
+                    "margin, vehicle and controller fly one vehicle")
+
+
 def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *, axes: Iterable[str] = (),
             laid_named: bool = False, **keywords: Any) -> Flight:
     """Validate a mission (object or file) with its :class:`Overrides` into a :class:`Flight`.
@@ -210,8 +215,7 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     src = m.source
     if m.vehicles:  # each vehicle's flight is prepared from its own mission (missions.fleet.vehicle_mission)
         raise ConfigError(f"{src}: vehicles: a mission of several vehicles is flown by bsst sim and bsst sitl "
-                          "(bridge.simulate, bridge.swarm.sitl): sweeps, bsst margin, bsst vehicle and bsst "
-                          "controller fly one vehicle")
+                          "(bridge.simulate, bridge.swarm.sitl): " + FLEETS_ELSEWHERE)
     _laid_tables_alone(m, over)
     prof = _profile_of(m, over)
     effects = effects_from_table(Table(m.effects, src, "effects"))

@@ -16,7 +16,7 @@ from itertools import product
 from pathlib import Path
 from typing import Any
 
-from bridge.core.flight import noise_problem, prepare
+from bridge.core.flight import FLEETS_ELSEWHERE, noise_problem, prepare
 from bridge.link.model import NEEDS, idle_problem, swept_links
 from bridge.record.runlog import check_trace_steps
 from bridge.swarm import check_fleet_steps, fleet_flights, fleet_mission
@@ -137,6 +137,9 @@ class Sweep:
         a swept burst length, noise scale and discretization axis change something."""
         self.check_size()
         self.check_link_trace()
+        if self.mission.vehicles:  # (said once, not as every cell's: the cells would lay it out again)
+            raise ConfigError(f"{self.mission.source}: vehicles: a mission of several vehicles ([[vehicles]]) is "
+                              f"not a sweep's cell: {FLEETS_ELSEWHERE}")
         base = self.cells()[0]
         probes = [_replace_cell(base, **{a: v}) for a in ("controller", "rate_hz", "discretization")
                   for v in getattr(self.grid, a)]
