@@ -194,7 +194,10 @@ def toml_from_bytes(raw: bytes, p: Path) -> dict[str, Any]:
     except UnicodeDecodeError:
         raise ConfigError(f"{name}: not a text file (expected TOML)") from None
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{name}: not valid TOML ({exc})") from None
+        text = utf8_text(raw).lstrip()  # (a ground station's file is read by its name's suffix: say so)
+        hint = ("; it reads as a QGroundControl plan: name it .plan" if text.startswith("{") and '"fileType"' in text
+                else "; it reads as a QGC WPL waypoint file: name it .waypoints" if text.startswith("QGC WPL") else "")
+        raise ConfigError(f"{name}: not valid TOML ({exc}){hint}") from None
     except ValueError as exc:  # an integer over Python's limit of digits (tomllib converts with int())
         raise ConfigError(f"{name}: not valid TOML ({too_many_digits(utf8_text(raw), exc)})") from None
     except RecursionError:

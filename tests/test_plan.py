@@ -382,3 +382,17 @@ def test_an_empty_plan_file_is_an_empty_path_not_the_missions_folder(tmp_path: P
         mission_from_table({"trajectory": {"kind": "plan", "file": ""}}, source)
     assert str(exc.value) == f"{source}: trajectory.file: an empty path (give the plan's file, relative to the " \
                              "mission's folder)"
+
+
+def test_a_plan_named_as_a_mission_says_its_suffix(tmp_path: Path) -> None:
+    """A plan saved as ``box.json`` (or a waypoint file as ``box.wp``) was refused as TOML alone (``not valid TOML
+    (Invalid statement (at line 1, column 1))``): a ground station's file is read by its suffix, which the line now
+    says (a user's tour)."""
+    for name, src, says in (("box.json", BOX_PLAN, "it reads as a QGroundControl plan: name it .plan"),
+                            ("box.wp", BOX_WPL, "it reads as a QGC WPL waypoint file: name it .waypoints")):
+        p = tmp_path / name
+        p.write_bytes(src.read_bytes())
+        why = refusal(p)
+        assert why.startswith(f"{p}: not valid TOML (") and why.endswith(f"); {says}"), why
+    (tmp_path / "m.toml").write_text("name = \n")
+    assert "it reads as" not in refusal(tmp_path / "m.toml")
