@@ -23,7 +23,7 @@ import pytest
 
 from bridge import simulate
 from bridge.cli import main
-from missions import MISSION_DIR, Mission, Sine
+from missions import MISSION_DIR, Mission, Sine, load_mission
 from params import dump_toml
 from tests.lawfiles import HOVERING
 from tests.sitlkit import run_bsst
@@ -296,6 +296,28 @@ def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path, here) -> No
     windy.write_text(dump_toml({**SHORT.to_dict(), "wind": {"speed_mps": 3.0}}))
     refused = here("margin", str(windy), "--over", "wind_mps", "--until", "rms=0.1")
     assert refused.returncode == 2 and "already sets speed_mps = 3" in refused.stderr, refused.stderr
+
+
+def test_a_swept_steady_wind_a_missions_wind_event_replaces_is_refused(tmp_path: Path, capsys) -> None:
+    """A mission whose ``[[events]]`` set the steady wind at 0 s: every probe flew the event's 3 m/s, and ``bsst margin
+    --over wind_mps`` said ``wind_mps 50 (bracket [50, -], held over the whole range)``, exit 0; a sweep's ``--wind
+    0,5`` wrote two rows of one flight (a user's tour). Refused, exit 2, naming the event, nothing written; a gust is
+    kept (it adds to the swept wind)."""
+    windy = tmp_path / "evented.toml"
+    windy.write_text(dump_toml({**SHORT.to_dict(), "events": [{"t_s": 0.0, "kind": "wind", "speed_mps": 3.0}]}))
+    for argv, head, each in ((["margin", "--over", "wind_mps", "--until", "rms=0.1"], "margin over wind_mps", "probe"),
+                             (["sweep", "--wind", "0,5"], "--wind 0,5", "cell")):
+        assert main([argv[0], str(windy), *argv[1:], "--out", str(tmp_path / argv[0])]) == 2
+        err = capsys.readouterr().err
+        assert err == (f"bsst: {head}: {windy}: events (t_s = 0, kind = wind) sets the steady wind from 0 s, so every "
+                       f"{each} would fly that event's 3 m/s from then, not its own: sweep the steady wind of a "
+                       "mission without wind events (gusts add to it and are kept)\n"), err
+        assert not (tmp_path / argv[0]).exists()
+    gusty = tmp_path / "gusty.toml"
+    gusty.write_text(dump_toml({**SHORT.to_dict(), "events": [{"t_s": 0.5, "kind": "gust", "duration_s": 0.2,
+                                                                "amplitude_mps": 1.0}]}))
+    from bridge.core.weather import swept_wind_problem  # here: the check alone (the refusals above fly nothing)
+    assert swept_wind_problem(load_mission(gusty)) is None
 
 
 # -- a plug-in law that cannot be flown is no boundary ----------------------------------------------------------------

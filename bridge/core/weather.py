@@ -6,7 +6,8 @@ In:  a :class:`~missions.Mission` (its raw ``[wind]`` table and ``[[events]]``: 
 Out: the :class:`~plant.wind.WindConfig` (None: still air) and the validated timeline
      (:class:`~plant.events.TimedEvent`, s); the timeline's ``link`` events as the link model's handovers
      (:class:`~bridge.link.model.LinkConfig` up and down from a step's time, s); why an event cannot act on this
-     vehicle (a line, or None); a bad event as an :class:`~plant.events.EventError` naming where it was given
+     vehicle (a line, or None); a bad event as an :class:`~plant.events.EventError` naming where it was given; why a
+     swept steady wind would not be flown as swept (a line, or None)
 
 Split out of :mod:`bridge.core.flight` (:func:`~bridge.core.flight.prepare` calls these in its turn): what the plant
 flies through, and what a timeline's event may do to this vehicle, is here.
@@ -28,6 +29,19 @@ from plant.events import (
 )
 from plant.sensors import SensorConfig
 from plant.wind import WindConfig, wind_from_table
+
+
+def swept_wind_problem(m: Mission, each: str = "cell") -> str | None:
+    """Why a swept steady wind (a sweep's ``--wind``, ``bsst margin --over wind_mps``) would not be flown as swept on
+    ``m`` (a line naming the event, or None): a ``wind`` event of its timeline sets the steady wind itself, so from
+    its step every ``each`` (a sweep's cell, a margin's probe) flies the event's wind whatever its own (a gust adds to
+    it, and is kept)."""
+    for e in timeline_from_tables(m.events, m.source, m.duration_s):
+        if e.kind == "wind":
+            return (f"{table_where(m.source, e)} sets the steady wind from {e.t_s:g} s, so every {each} would fly "
+                    f"that event's {e.get('speed_mps'):g} m/s from then, not its own: sweep the steady wind of a "
+                    "mission without wind events (gusts add to it and are kept)")
+    return None
 
 
 def event_problem(kind: str, prof: Profile, sensors: SensorConfig | None, estimator: str = "ekf",
