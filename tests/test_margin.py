@@ -298,26 +298,35 @@ def test_the_wind_margin_is_found_inside_its_bracket(tmp_path: Path, here) -> No
     assert refused.returncode == 2 and "already sets speed_mps = 3" in refused.stderr, refused.stderr
 
 
-def test_a_swept_steady_wind_a_missions_wind_event_replaces_is_refused(tmp_path: Path, capsys) -> None:
+def test_a_swept_wind_or_link_a_missions_event_replaces_is_refused(tmp_path: Path, capsys) -> None:
     """A mission whose ``[[events]]`` set the steady wind at 0 s: every probe flew the event's 3 m/s, and ``bsst margin
     --over wind_mps`` said ``wind_mps 50 (bracket [50, -], held over the whole range)``, exit 0; a sweep's ``--wind
-    0,5`` wrote two rows of one flight (a user's tour). Refused, exit 2, naming the event, nothing written; a gust is
-    kept (it adds to the swept wind)."""
+    0,5`` wrote two rows of one flight; a link handover likewise (``delay_ms 60000``, held over the whole range: a
+    user's tour). Refused, exit 2, naming the event, nothing written; a gust is kept (it adds to the swept wind)."""
     windy = tmp_path / "evented.toml"
     windy.write_text(dump_toml({**SHORT.to_dict(), "events": [{"t_s": 0.0, "kind": "wind", "speed_mps": 3.0}]}))
     for argv, head, each in ((["margin", "--over", "wind_mps", "--until", "rms=0.1"], "margin over wind_mps", "probe"),
-                             (["sweep", "--wind", "0,5"], "--wind 0,5", "cell")):
+                             (["sweep", "--wind", "0,5"], "grid.wind_mps (--wind)", "cell")):
         assert main([argv[0], str(windy), *argv[1:], "--out", str(tmp_path / argv[0])]) == 2
         err = capsys.readouterr().err
         assert err == (f"bsst: {head}: {windy}: events (t_s = 0, kind = wind) sets the steady wind from 0 s, so every "
                        f"{each} would fly that event's 3 m/s from then, not its own: sweep the steady wind of a "
                        "mission without wind events (gusts add to it and are kept)\n"), err
         assert not (tmp_path / argv[0]).exists()
+    handed = tmp_path / "handed.toml"  # a link handover at 1 s: the link's axes alike
+    handed.write_text(dump_toml({**SHORT.to_dict(), "events": [{"t_s": 1.0, "kind": "link", "profile": "wifi"}]}))
+    for argv, head, each in ((["margin", "--over", "delay_ms", "--until", "rms=0.1"], "margin over delay_ms", "probe"),
+                             (["sweep", "--loss", "0,20"], "grid.loss_pct (--loss)", "cell")):
+        assert main([argv[0], str(handed), *argv[1:], "--out", str(tmp_path / argv[0])]) == 2
+        err = capsys.readouterr().err
+        assert err == (f"bsst: {head}: {handed}: events (t_s = 1, kind = link) hands the link over (link handover to "
+                       f"wifi) from 1 s, so every {each} would fly that link from then, not its own: sweep the link of "
+                       "a mission without link events\n"), err
     gusty = tmp_path / "gusty.toml"
     gusty.write_text(dump_toml({**SHORT.to_dict(), "events": [{"t_s": 0.5, "kind": "gust", "duration_s": 0.2,
                                                                 "amplitude_mps": 1.0}]}))
-    from bridge.core.weather import swept_wind_problem  # here: the check alone (the refusals above fly nothing)
-    assert swept_wind_problem(load_mission(gusty)) is None
+    from bridge.core.weather import swept_replaced_problem  # here: the check alone (the refusals above fly nothing)
+    assert swept_replaced_problem(load_mission(gusty), "wind") is None
 
 
 # -- a plug-in law that cannot be flown is no boundary ----------------------------------------------------------------

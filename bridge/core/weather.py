@@ -31,16 +31,20 @@ from plant.sensors import SensorConfig
 from plant.wind import WindConfig, wind_from_table
 
 
-def swept_wind_problem(m: Mission, each: str = "cell") -> str | None:
-    """Why a swept steady wind (a sweep's ``--wind``, ``bsst margin --over wind_mps``) would not be flown as swept on
-    ``m`` (a line naming the event, or None): a ``wind`` event of its timeline sets the steady wind itself, so from
-    its step every ``each`` (a sweep's cell, a margin's probe) flies the event's wind whatever its own (a gust adds to
-    it, and is kept)."""
+def swept_replaced_problem(m: Mission, kind: str, each: str = "cell") -> str | None:
+    """Why a swept steady wind (``kind`` ``wind``: a sweep's ``--wind``, ``bsst margin --over wind_mps``) or link
+    (``link``: ``--delay``, ``--loss``, ...) would not be flown as swept on ``m`` (a line naming the event, or None):
+    an event of that kind in its timeline sets the steady wind, or hands both directions' link over, itself, so from
+    its step every ``each`` (a sweep's cell, a margin's probe) flies the event's whatever its own (a gust adds to the
+    wind, and is kept)."""
     for e in timeline_from_tables(m.events, m.source, m.duration_s):
-        if e.kind == "wind":
+        if e.kind == kind == "wind":
             return (f"{table_where(m.source, e)} sets the steady wind from {e.t_s:g} s, so every {each} would fly "
                     f"that event's {e.get('speed_mps'):g} m/s from then, not its own: sweep the steady wind of a "
                     "mission without wind events (gusts add to it and are kept)")
+        if e.kind == kind == "link":
+            return (f"{table_where(m.source, e)} hands the link over ({e.text()}) from {e.t_s:g} s, so every {each} "
+                    "would fly that link from then, not its own: sweep the link of a mission without link events")
     return None
 
 

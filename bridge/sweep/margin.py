@@ -63,7 +63,7 @@ from typing import Any
 
 from bridge.core.flight import noise_problem, prepare
 from bridge.core.interrupt import Deferred, sigint_deferred
-from bridge.core.weather import swept_wind_problem
+from bridge.core.weather import swept_replaced_problem
 from bridge.link.model import NEEDS, idle_problem
 from bridge.record.runlog import run_dir, write_json_atomic
 from bridge.sweep.cells import FAILED, broke_policy, seeds_alike
@@ -245,9 +245,10 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     if over == "wind_mps" and mission_value(mission, over):
         raise ConfigError(f"margin over wind_mps: the mission's [wind] already sets speed_mps = "
                           f"{mission_value(mission, over):g}; search from a mission without it")
-    why = swept_wind_problem(mission, "probe") if over == "wind_mps" else None
-    if why:  # every probe would fly the event's wind from its step: a margin of the event's, not the searched one
-        raise ConfigError(f"margin over wind_mps: {why}"[:400])
+    kind = "wind" if over == "wind_mps" else "link" if over in LINK_AXES else None
+    why = swept_replaced_problem(mission, kind, "probe") if kind else None
+    if why:  # every probe would fly the event's wind or link from its step: a margin of the event's, not the searched
+        raise ConfigError(f"margin over {over}: {why}"[:400])
     flight = prepare(mission, axes=(over,))  # (a [link] key the searched value gives its need is not idle)
     trace = link_trace(flight) if over in LINK_AXES else None
     if trace:

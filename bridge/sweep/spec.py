@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.core.flight import FLEETS_ELSEWHERE, noise_problem, prepare
-from bridge.core.weather import swept_wind_problem
+from bridge.core.weather import swept_replaced_problem
 from bridge.link.model import NEEDS, idle_problem, swept_links
 from bridge.record.runlog import check_trace_steps
 from bridge.swarm import check_fleet_steps, fleet_flights, fleet_mission
@@ -141,9 +141,11 @@ class Sweep:
         if self.mission.vehicles:  # (said once, not as every cell's: the cells would lay it out again)
             raise ConfigError(f"{self.mission.source}: vehicles: a mission of several vehicles ([[vehicles]]) is "
                               f"not a sweep's cell: {FLEETS_ELSEWHERE}")
-        why = swept_wind_problem(self.mission) if self.grid.wind_mps else None
-        if why:  # (each cell would fly the event's wind from its step: a row's wind_mps not what it flew)
-            raise ConfigError(f"--wind {','.join(f'{v:g}' for v in self.grid.wind_mps)}: {why}"[:400])
+        for axis, kind in (("wind_mps", "wind"), *((a, "link") for a in LINK_AXES)):
+            values = getattr(self.grid, axis)
+            why = swept_replaced_problem(self.mission, kind) if values else None
+            if why:  # (each cell would fly the event's wind or link from its step: a row's value not what it flew)
+                raise ConfigError(f"grid.{axis} (--{SHORT[axis]}): {why}"[:400])
         base = self.cells()[0]
         probes = [_replace_cell(base, **{a: v}) for a in ("controller", "rate_hz", "discretization")
                   for v in getattr(self.grid, a)]
