@@ -120,6 +120,8 @@ def test_a_fleet_past_the_last_instance_is_refused_before_anything_starts(tmp_pa
     assert main(["sitl", str(short_sine(tmp_path)), "--vehicles", "4", "--instance", "7", "--out",
                  str(tmp_path / "no")]) == 2
     assert "instances are 0-9" in capsys.readouterr().err and not (tmp_path / "no").exists()
+    with pytest.raises(ConfigError, match="fly at most 1 vehicle from this instance$"):  # one, not "1 vehicles"
+        sitl(short_sine(tmp_path), vehicles=2, instance=9, out=tmp_path / "no")
 
 
 def test_a_fleet_from_instance_n_takes_px4s_system_ids_from_n_plus_one(tmp_path: Path) -> None:

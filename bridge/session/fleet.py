@@ -78,9 +78,10 @@ def check_fleet(count: int, *, realtime: bool, instance: int | None, gcs: str | 
         return gcs_text
     last = instance + count - 1
     if last > MAX_INSTANCE:
+        room = MAX_INSTANCE + 1 - instance
         raise ConfigError(f"--vehicles {count} from --instance {instance}: vehicle i is instance {instance} + i - 1, "
                           f"up to instance {last}; instances are 0-{MAX_INSTANCE}: fly at most "
-                          f"{MAX_INSTANCE + 1 - instance} vehicles from this instance")
+                          f"{room} vehicle{'s' if room != 1 else ''} from this instance")
     return gcs_text
 
 
