@@ -17,7 +17,7 @@ from bridge.core.flight import prepare
 from missions import load_mission
 from missions.minsnap import Smooth, demands
 from missions.mission import mission_from_table
-from missions.planfiles import read_plan_text
+from missions.planfiles import OTHER_NAMES, SUPPORTED, command_name, read_plan_text
 from missions.route import Limits, route_of
 from params import ConfigError
 from tests.benchkit import benchmark_module
@@ -96,6 +96,16 @@ def test_a_slower_cruise_is_a_longer_flight() -> None:
     assert slow.knots[-1].t == fast.knots[-1].t  # DO_CHANGE_SPEED 5 m/s after takeoff sets the box's speed
     pf = read_plan_text(BOX_PLAN.read_text().replace('5,\n                    -1', '2,\n                    -1'), "box")
     assert route_of(pf, Limits(), 100.0).knots[-1].t > fast.knots[-1].t + 10.0
+
+
+def test_every_command_a_refusal_names_is_named_as_mavlinks_common_xml_names_it():
+    """The names a plan's refusal gives its commands are MAVLink's (``MAV_CMD_`` dropped), and a command we fly or
+    know the name of is never the bare ``MAV_CMD (82)`` (NAV_SPLINE_WAYPOINT was, a user's tour)."""
+    from pymavlink.dialects.v20 import common  # the reference, not our code's dependency
+
+    for cmd, name in {**SUPPORTED, **OTHER_NAMES}.items():
+        assert common.enums["MAV_CMD"][cmd].name == f"MAV_CMD_{name}", cmd
+    assert command_name(82) == "NAV_SPLINE_WAYPOINT (82)" and command_name(4242) == "MAV_CMD (4242)"
 
 
 @pytest.mark.parametrize("edit, words", [
