@@ -535,8 +535,9 @@ def test_a_run_directory_another_run_writes_is_refused_and_kept_whole(tmp_path: 
     own beside what the first wrote after (its summary.json and events.log, the second's mission.toml and
     trace.csv)."""
     out = tmp_path / "same"
-    first = Proc.bsst("sitl", str(short_sine(tmp_path, 5.0)), "--realtime", "--out", str(out), "--no-plots",
-                      cwd=ROOT)
+    held = short_sine(tmp_path, 5.0)  # its end held: the refusals come while it flies; its end landing (and
+    held.write_text(held.read_text() + '[end]\naction = "hold"\n')  # COM_DISARM_LAND after), ~4 s, held nothing
+    first = Proc.bsst("sitl", str(held), "--realtime", "--out", str(out), "--no-plots", cwd=ROOT)
     try:
         wait_for(lambda: (out / "vehicle.bin").is_file() and (out / "vehicle.bin").stat().st_size > 0
                  or first.p.poll() is not None, 60, "the session flying")
