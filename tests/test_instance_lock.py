@@ -51,9 +51,11 @@ def free(n: int) -> bool:
         return False
 
 
-def _mission(tmp_path: Path, seconds: float) -> str:
-    path = tmp_path / f"sine{seconds:g}.toml"
-    path.write_text(SINE.format(seconds))
+def _mission(tmp_path: Path, seconds: float, hold: bool = False) -> str:
+    """The sine of ``seconds``; ``hold``: its end held, for a session flown at 1x whose end landing (and
+    COM_DISARM_LAND after it, ~4 s of the wall clock) no test reads."""
+    path = tmp_path / f"sine{seconds:g}{'-hold' if hold else ''}.toml"
+    path.write_text(SINE.format(seconds) + ('[end]\naction = "hold"\n' if hold else ""))
     return str(path)
 
 
@@ -75,7 +77,7 @@ def test_two_sessions_on_one_instance_the_second_is_refused_the_first_flies_and_
     (its pid), exit 2; the first flies its mission to the end (exit 0); then N is free again, and a third session
     flies on it. The old code refused the second only for its vehicle's port, not naming the session holding it,
     and only once the first's vehicle had bound it (earlier, both wrote their run directories)."""
-    a, n = _flying(tmp_path, _mission(tmp_path, 8.0))
+    a, n = _flying(tmp_path, _mission(tmp_path, 8.0, hold=True))
     try:
         b = run_bsst("sitl", _mission(tmp_path, 0.5), "--instance", str(n), "--out", tmp_path / "b", "--no-plots",
                      timeout=120)
@@ -170,7 +172,7 @@ def test_two_threads_of_one_process_cannot_fly_one_instance(tmp_path: Path) -> N
 
         def fly() -> None:
             try:
-                first["run"] = sitl(_mission(tmp_path, 1.5), instance=n, out=tmp_path / "a", plots=False,
+                first["run"] = sitl(_mission(tmp_path, 1.5, hold=True), instance=n, out=tmp_path / "a", plots=False,
                                     speed=1.0)  # (1.5 s of wall time: it flies on while the second, refused
                 # in this process before anything starts, is turned away; the assert below says if it had ended)
             except BaseException as exc:  # re-raised below
