@@ -316,7 +316,9 @@ def test_ctrl_c_while_the_summary_is_printed_changes_nothing(tmp_path) -> None:
         proc.stop()
 
 
-LONG_SINE = 'name = "sine300"\nduration_s = 300.0\n[trajectory]\nkind = "sine"\n'  # never over before the signal
+# never over before the signal; under auto's 240 s (bridge.core.scalar.AUTO_STEPS), so no run loads numba's compiled
+# kernels (~0.6 CPU-s a run, nothing these tests look at)
+LONG_SINE = 'name = "sine200"\nduration_s = 200.0\n[trajectory]\nkind = "sine"\n'
 
 
 @pytest.mark.parametrize("controller", ["bsst", "examples/my_law.py:MyLaw"])  # in this process; in a watched child
@@ -327,7 +329,7 @@ def test_a_stop_sent_to_bsst_sim_alone_ends_it_aborted_recorded(tmp_path, sig: s
     the user's own (flown in a watched child, bridge.nodes.watched) as with a built-in one. Before, SIGINT with a
     user's law was never answered (the parent ignored it, the child never had it), SIGTERM killed the run with no
     summary.json (exit 143 said, or -15 silent)."""
-    mission = tmp_path / "sine300.toml"
+    mission = tmp_path / "sine200.toml"
     mission.write_text(LONG_SINE)
     out = tmp_path / "run"
     proc = Proc.bsst("sim", str(mission), "--no-plots", "--out", str(out), "--controller", controller)
@@ -352,7 +354,7 @@ def test_a_sigterm_ends_bsst_sim_aborted_recorded_where_sigint_is_ignored(tmp_pa
     recorded, exit 1, and a SIGINT sent before it still ignored. Until the third wave's forty-first session the
     SIGTERM, taken as a Ctrl-C by raising SIGINT, met SIGINT's SIG_IGN: the 300 s sine flew to its end, ``completed``,
     exit 0 (8.9 s after the SIGTERM, measured)."""
-    mission = tmp_path / "sine300.toml"
+    mission = tmp_path / "sine200.toml"
     mission.write_text(LONG_SINE)
     out = tmp_path / "run"
     proc = Proc([sys.executable, "-c", SIGINT_IGNORED, "sim", str(mission), "--no-plots", "--out", str(out)])
@@ -403,7 +405,7 @@ def test_a_stop_landing_between_two_steps_ends_the_flight_aborted_recorded(tmp_p
     yielded): the flight ends ``aborted`` at that step, recorded, exit 1. Before, it escaped the flight: ``bsst:
     interrupted``, exit 1, no summary.json; with a watched law, the test above failed so once in a quiet make
     test (SIGTERM, six workers on two cores)."""
-    mission = tmp_path / "sine300.toml"
+    mission = tmp_path / "sine200.toml"
     mission.write_text(LONG_SINE)
     out = tmp_path / "run"
     proc = Proc([sys.executable, "-c", textwrap.dedent(BETWEEN_STEPS), str(out), str(mission), sig.name, controller])
@@ -437,8 +439,9 @@ BEFORE_THE_FORK = """
 def test_a_stop_before_a_watched_flight_starts_is_said(tmp_path, sig: signal.Signals) -> None:
     """A stop sent to ``bsst sim`` as it starts a watched flight's child: said (``bsst: interrupted``, exit 1, no
     traceback), nothing flown. Before, the command ignored SIGINT from just before it (SIGTERM became that SIGINT)
-    until the child was watched: the stop was lost, and the 300 s mission flew on (here: past the 60 s wait)."""
-    mission = tmp_path / "sine300.toml"
+    until the child was watched: the stop was lost, and the long mission flew on (here: to its end, exit 0, or past
+    the 60 s wait)."""
+    mission = tmp_path / "sine200.toml"
     mission.write_text(LONG_SINE)
     out = tmp_path / "run"
     proc = Proc([sys.executable, "-c", textwrap.dedent(BEFORE_THE_FORK), str(out), str(mission), sig.name])
@@ -569,7 +572,7 @@ def test_a_ctrl_c_to_the_group_is_one_stop_for_a_watched_flight(tmp_path) -> Non
     """A terminal's Ctrl-C (SIGINT to the process group) reaches ``bsst sim`` and its watched child both: the parent
     passes it on, and the child takes the two as one stop, its record whole (a second KeyboardInterrupt, raised
     while the first was recorded, would cut it)."""
-    mission = tmp_path / "sine300.toml"
+    mission = tmp_path / "sine200.toml"
     mission.write_text(LONG_SINE)
     out = tmp_path / "run"
     proc = Proc.bsst("sim", str(mission), "--no-plots", "--out", str(out), "--controller", "examples/my_law.py:MyLaw")
