@@ -16,7 +16,6 @@ Every failure names ``file:line``. There is no allow-list: the limits hold for e
 from __future__ import annotations
 
 import ast
-import functools
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -111,25 +110,29 @@ def _is_static(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> bool:
     return any(isinstance(d, ast.Name) and d.id == "staticmethod" for d in fn.decorator_list)
 
 
-@functools.cache
-def parsed() -> tuple[tuple[str, str, ast.Module], ...]:
+Parsed = tuple[tuple[str, str, ast.Module], ...]
+
+
+@pytest.fixture(scope="module")
+def parsed() -> Parsed:
     """Every module of the packages, parsed once, when a test first asks (not while the suite is collected:
-    each worker collects every test file, and parsing ~150 modules cost each ~0.9 s before any test ran)."""
+    each worker collects every test file, and parsing ~150 modules cost each ~0.9 s before any test ran); a
+    module-scoped fixture, so that its three tests go to one worker (tests/scheduling.py), which parses once."""
     return tuple(modules())
 
 
-def test_no_module_or_function_is_over_its_limit() -> None:
-    problems = [p for path, src, tree in parsed() for p in size_problems(path, src, tree).values()]
+def test_no_module_or_function_is_over_its_limit(parsed: Parsed) -> None:
+    problems = [p for path, src, tree in parsed for p in size_problems(path, src, tree).values()]
     assert not problems, "\n".join(problems)
 
 
-def test_every_module_opens_with_a_docstring_with_its_ports() -> None:
-    problems = [p for path, _, tree in parsed() for p in [docstring_problem(path, tree)] if p]
+def test_every_module_opens_with_a_docstring_with_its_ports(parsed: Parsed) -> None:
+    problems = [p for path, _, tree in parsed for p in [docstring_problem(path, tree)] if p]
     assert not problems, "\n".join(problems)
 
 
-def test_public_functions_have_type_hints() -> None:
-    problems = [p for path, _, tree in parsed() for p in hint_problems(path, tree)]
+def test_public_functions_have_type_hints(parsed: Parsed) -> None:
+    problems = [p for path, _, tree in parsed for p in hint_problems(path, tree)]
     assert not problems, "\n".join(problems)
 
 
