@@ -212,8 +212,17 @@ def _path_in(comp: list[str], graph: Mapping[str, set[str]]) -> list[str]:
         seen.add(v)
 
 
-def test_the_project_keeps_its_layers() -> None:
-    problems = layer_problems(project_sources())
+@pytest.fixture(scope="module")
+def sources() -> dict[str, str]:
+    """:func:`project_sources`, read once for the module's tests that check the whole project: a module-scoped
+    fixture, so that they go to one worker (tests/scheduling.py), whose ``_import_nodes`` cache then parses each
+    module once (spread over six workers, each parsed the whole project again: ~1 CPU-s a worker). Copied where a
+    test changes it."""
+    return project_sources()
+
+
+def test_the_project_keeps_its_layers(sources: dict[str, str]) -> None:
+    problems = layer_problems(sources)
     assert not problems, "\n".join(problems)
 
 
@@ -222,14 +231,14 @@ def test_every_bridge_subpackage_is_a_layer() -> None:
         assert group_of(f"bridge.{d.name}") == f"bridge.{d.name}", f"bridge/{d.name}/ is in no layer of LAYERS"
 
 
-def test_every_bridge_module_opens_with_a_docstring() -> None:
-    for name, src in project_sources().items():
+def test_every_bridge_module_opens_with_a_docstring(sources: dict[str, str]) -> None:
+    for name, src in sources.items():
         if name.startswith("bridge") and name != "bridge.__main__":
             assert ast.get_docstring(ast.parse(src)), f"{name} has no module docstring"
 
 
-def test_pure_packages_touch_no_files() -> None:
-    for name, src in project_sources().items():
+def test_pure_packages_touch_no_files(sources: dict[str, str]) -> None:
+    for name, src in sources.items():
         if name.split(".")[0] not in PURE:
             continue
         for node in ast.walk(ast.parse(src)):
@@ -249,16 +258,16 @@ def test_pure_packages_touch_no_files() -> None:
     ("plant.bad", "import subprocess\n", "pure package imports subprocess"),
     ("bridge.core.bad", "def f():\n    from bridge.link import model\n", "without a comment"),
 ])
-def test_the_checker_fails_on_a_broken_rule(name: str, source: str, expected: str) -> None:
-    sources = project_sources()
+def test_the_checker_fails_on_a_broken_rule(sources: dict[str, str], name: str, source: str, expected: str) -> None:
+    sources = dict(sources)
     assert not any(expected in p for p in layer_problems(sources))
     sources[name] = source
     problems = layer_problems(sources)
     assert any(expected in p for p in problems), problems
 
 
-def test_the_checker_fails_on_a_circle() -> None:
-    sources = project_sources()
+def test_the_checker_fails_on_a_circle(sources: dict[str, str]) -> None:
+    sources = dict(sources)
     sources["bridge.core.ping"] = "from bridge.core.pong import x\n"
     sources["bridge.core.pong"] = "def f():\n    from bridge.core.ping import y  # lazy\n"
     problems = layer_problems(sources)
