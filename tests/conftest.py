@@ -27,6 +27,7 @@ from hypothesis import settings
 from bridge.autopilot.estimator import compile_estimator
 from bridge.batch import compile_batch
 from bridge.core.flight import load_compiled_kernels
+from tests.quietgc import collector_off
 
 # No deadline on a Hypothesis example: its default (200 ms) is a timing assertion, and with both cores busy an
 # example of tests/test_power.py's took longer (the thirty-eighth session, load ~14). Speed is for benchmarks/.
@@ -203,6 +204,16 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | 
     from tests.scheduling import SharedFixtureScheduling  # the controller only: xdist is not loaded without -n
 
     return SharedFixtureScheduling(config, log)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_collection(session: pytest.Session) -> Iterator[None]:
+    """Collect with the garbage collector off: importing every test module (numba, pymavlink, MAVSDK, the kits)
+    and parsing each module's source for its groups (tests/scheduling.py) makes objects that live as long as the
+    worker, and each collection of the oldest generation meanwhile walked all those made before them. Not frozen
+    after (a test worker's heap is not: tests/test_plots.py draws in one, as a user's ``bsst`` does)."""
+    with collector_off():
+        return (yield)
 
 
 def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool | None:

@@ -32,6 +32,8 @@ from typing import Any
 
 from xdist.scheduler import LoadScopeScheduling
 
+from tests.quietgc import collector_off
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -98,7 +100,8 @@ def shared_groups(source: str, path: str = "") -> dict[str, str]:
 @functools.cache
 def _groups_in(path: str) -> dict[str, str]:
     try:
-        return shared_groups((ROOT / path).read_text(encoding="utf-8"), path)
+        with collector_off():  # the controller parses every test module (tests/quietgc.py)
+            return shared_groups((ROOT / path).read_text(encoding="utf-8"), path)
     except (OSError, SyntaxError, UnicodeDecodeError):
         return {}  # not a file we can read: every test of it on its own (as --dist load)
 

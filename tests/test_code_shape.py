@@ -16,11 +16,12 @@ Every failure names ``file:line``. There is no allow-list: the limits hold for e
 from __future__ import annotations
 
 import ast
-import gc
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+
+from tests.quietgc import collector_off
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("bridge", "controller", "plant", "missions")
@@ -120,13 +121,8 @@ def parsed() -> Parsed:
     each worker collects every test file, and parsing ~150 modules cost each ~0.9 s before any test ran); a
     module-scoped fixture, so that its three tests go to one worker (tests/scheduling.py), which parses once. The
     garbage collector is off meanwhile: the trees kept made each collection walk them all (1.2 CPU-s, 0.31 off)."""
-    was = gc.isenabled()
-    gc.disable()
-    try:
+    with collector_off():
         return tuple(modules())
-    finally:
-        if was:
-            gc.enable()
 
 
 def test_no_module_or_function_is_over_its_limit(parsed: Parsed) -> None:

@@ -19,13 +19,13 @@ Checked with ``ast`` on each file's source, and shown failing on broken samples.
 from __future__ import annotations
 
 import ast
-import gc
 import re
 import time
 from pathlib import Path
 
 import pytest
 
+from tests.quietgc import collector_off
 from tests.scheduling import CHEAP, is_marked_process, scope_of, shared_groups
 from tests.timeline import report
 from tests.waiting import wait_for
@@ -93,13 +93,8 @@ def _called(call: ast.Call) -> str:
 def parse_tests() -> dict[str, tuple[str, ast.Module]]:
     """Each test module's path, source and tree, parsed with the garbage collector off: the trees kept while the
     rest are parsed made each collection walk them all (1.2 CPU-s, against 0.36 with it off)."""
-    was = gc.isenabled()
-    gc.disable()
-    try:
+    with collector_off():
         return {f"tests/{f.name}": (text, ast.parse(text)) for f in TESTS for text in [f.read_text()]}
-    finally:
-        if was:
-            gc.enable()
 
 
 def marker_problems(parsed: dict[str, tuple[str, ast.Module]] | None = None) -> list[str]:
