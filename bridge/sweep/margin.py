@@ -57,6 +57,7 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from numbers import Real
 from operator import itemgetter
 from pathlib import Path
 from typing import Any
@@ -72,7 +73,7 @@ from bridge.sweep.executors import Report, engine_for, run_batch, run_cell, run_
 from bridge.sweep.grid import LINK_AXES, RANGES, Cell, cell_flight, link_trace, mission_value
 from bridge.sweep.spec import check_jobs
 from controller.law import LawError, is_builtin
-from missions import Mission
+from missions import Mission, load_mission
 from params import ConfigError
 from params.text import number
 
@@ -87,6 +88,7 @@ MAX_HALVINGS = 24  # the finest --resolution is an axis's range / 2^24 (delay: 3
 RESOLUTION_TOP = 1e6  # the coarsest (the flag's own top)
 BELOW_STEPS = 16  # the monotonicity check's default band: the bisection's bracket four halvings before its end
 MAX_BELOW = 1024  # the widest band, in resolution steps
+MAX_SEEDS = 1000  # seeds per value (--seeds)
 
 
 @dataclass(frozen=True)
@@ -95,6 +97,17 @@ class Until:
 
     rms: float | None = None
     cls: str | None = None
+
+    def __post_init__(self) -> None:
+        """One made in Python is checked as ``--until`` is (:func:`parse_until`): one of the two, a positive RMS, a
+        class worse than clean. (Until(cls="foo") raised a bare ValueError after its first round had flown.)"""
+        if (self.rms is None) == (self.cls is None):
+            raise ConfigError(f"until: give one of rms=METRES or cls=NAME, got {self!r}")
+        if self.rms is not None and (isinstance(self.rms, bool) or not isinstance(self.rms, Real)
+                                     or not (math.isfinite(self.rms) and self.rms > 0)):
+            raise ConfigError(f"until.rms: must be a positive number of metres, got {self.rms!r}"[:200])
+        if self.cls is not None and (not isinstance(self.cls, str) or self.cls not in CLASSES[1:]):
+            raise ConfigError(f"until.cls: must be one of {', '.join(CLASSES[1:])}, got {self.cls!r}"[:200])
 
     def failed(self, row: dict[str, Any], classes: Classes) -> bool:
         """Whether a probe's row fails: the criterion, or a safety policy its run broke (its ``policies``
@@ -216,7 +229,32 @@ def resolution_range(over: str) -> tuple[float, float]:
     return (top - lo) * 2.0 ** -MAX_HALVINGS, RESOLUTION_TOP
 
 
-def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[str] | None = None,
+def _called_with(mission: Mission | str | Path, until: Until | str, controllers: object, seeds: object,
+                 resolution: object, below: object) -> tuple[Mission, Until]:
+    """The mission (a path is loaded, as :func:`bridge.sweep.sweep` takes one) and the criterion (a string is
+    ``--until``'s) of a Python call, its other arguments checked as their flags are: a ConfigError or TypeError
+    naming the argument. (``seeds=0`` flew nothing and claimed the axis's whole range; ``controllers="smc"`` flew
+    law 's'; a string ``until`` raised an AttributeError after its first round.)"""
+    if isinstance(mission, str | os.PathLike):
+        mission = load_mission(mission)
+    elif not isinstance(mission, Mission):
+        raise TypeError(f"mission: expected a Mission or a path to its file, got {mission!r}"[:200])
+    if isinstance(until, str):
+        until = parse_until(until)
+    elif not isinstance(until, Until):
+        raise TypeError(f"until: expected an Until or 'rms=METRES' / 'class=NAME', got {until!r}"[:200])
+    if controllers is not None and (isinstance(controllers, str) or not isinstance(controllers, Sequence)
+                                    or not controllers or not all(isinstance(c, str) for c in controllers)):
+        raise TypeError(f"controllers: expected a list of law names (['bsst', 'smc']), got {controllers!r}"[:200])
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= MAX_SEEDS:
+        raise ConfigError(f"seeds: must be a whole number in [1, {MAX_SEEDS}], got {seeds!r}"[:200])
+    for name, value in (("resolution", resolution), ("below", below)):
+        if (value is not None or name == "resolution") and (isinstance(value, bool) or not isinstance(value, Real)):
+            raise TypeError(f"{name}: expected a number, got {value!r}"[:200])
+    return mission, until
+
+
+def margin(mission: Mission | str | Path, over: str, until: Until | str, *, controllers: Sequence[str] | None = None,
            seeds: int = 1, resolution: float = 0.25, classes: Classes | None = None, jobs: int | None = None,
            engine: str = "auto", progress: Callable[[str], None] | None = None,
            below: float | None = None) -> dict[str, Any]:
@@ -225,6 +263,7 @@ def margin(mission: Mission, over: str, until: Until, *, controllers: Sequence[s
     :class:`MarginInterrupted`, carrying the content of what was flown."""
     if over not in OVER:
         raise ConfigError(f"--over must be one of {', '.join(OVER)}, got {over!r}")
+    mission, until = _called_with(mission, until, controllers, seeds, resolution, below)
     check_jobs(jobs)
     least, most = resolution_range(over)
     if not least <= resolution <= most:  # also refuses nan
