@@ -826,7 +826,7 @@ def test_a_link_refused_without_a_file_names_no_file(files, capsys):
     line's, and the message says so; until the third wave's thirty-third session it went on "(the file's [link]
     with these laid over it: ...)", of a file there was not."""
     trace = files.root / "short.csv"
-    trace.write_text("t_s,delay_ms\n0,10\n0.1,10\n")
+    trace.write_text("t_s,delay_ms\n0,10\n0.01,10\n")  # 0.02 s, shorter than the relay's --duration 0.1
     line = _refused(capsys, ["relay", *BASE["relay"](files), "--link-trace", trace], "link.up.trace")
     assert line.startswith("bsst: command line: ") and "file's" not in line and "laid over" not in line, line
 

@@ -207,6 +207,30 @@ def test_bad_relay_input_exits_2_with_one_line(args: list[str], message: str, ca
     assert len(err) == 1 and message in err[0]
 
 
+def test_without_a_mission_the_relays_run_is_its_duration(tmp_path: Path, capsys) -> None:
+    """``bsst relay`` without ``--mission`` holds a trace and a blackout to its ``--duration`` (a day without it):
+    a 200 s trace relays for 0.3 s unlooped, and a blackout that starts after the relay's end is refused as one after
+    a mission's end is (exit 2, one line). Until the third wave's forty-third session the trace was refused as
+    "shorter than the mission (86400 s)", of a relay with no mission, and the blackout relayed, exit 0, never
+    happening."""
+    from bridge.cli import main
+
+    trace = tmp_path / "t.csv"
+    trace.write_text("t_s,delay_ms\n0,10\n100,10\n")
+    relay = ["relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:1"]
+    assert main([*relay, "--link-trace", str(trace), "--duration", "0.3"]) == 0
+    capsys.readouterr()
+    for extra, message in (
+            (["--link-trace", str(trace)], f"{trace} lasts 200 s (2 up records), shorter than the relay's run "
+                                           "without --duration (86400 s); loop it"),
+            (["--link-trace", str(trace), "--duration", "300"], "shorter than the relay's --duration (300 s)"),
+            (["--blackout", "1:1", "--duration", "0.5"], "the window [1, 2) s starts after the relay's end "
+                                                         "(--duration 0.5 s), so it would never happen")):
+        assert main([*relay, *extra]) == 2, extra
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+
+
 def test_stats_never_replaces_a_file_unasked_nor_one_the_relay_reads(tmp_path: Path, capsys) -> None:
     """``--stats`` an existing file is refused unless ``--overwrite``; a file the relay reads (its mission, its
     trace) even with it, as ``bsst link fit --out`` (exit 2, one line, before it binds, the file kept). Until the

@@ -225,7 +225,18 @@ def cmd_relay(args: argparse.Namespace) -> int:
     mission = checked_mission(args, args.mission or None)  # read once; a link flag that would change nothing: as
     # bsst sim refuses it. The one path from a mission and its overrides to the parts: the whole mission is checked
     # (a key of its [link] that would change nothing too), and the relay flies the link it gives
-    settings = prepare(mission if mission is not None else at_rest(), overrides_from_args(args)).link
+    try:  # without a mission the relay's run is its flight: --duration, else a day (a trace must last it, a
+        # blackout start in it: until the forty-third session a 200 s trace with --duration 30 was refused as
+        # shorter than "the mission (86400 s)", and a blackout after --duration relayed, exit 0, never happening)
+        settings = prepare(mission if mission is not None else at_rest(args.duration or 86400.0),
+                           overrides_from_args(args)).link
+    except ConfigError as exc:
+        if mission is not None:
+            raise
+        run = ("run without --duration" if not args.duration else "--duration" if args.duration <= 86400.0
+               else "run (a day at most)")
+        raise ConfigError(str(exc).replace("the mission (", f"the relay's {run} (")
+                          .replace("the mission's end (duration_s = ", f"the relay's end ({run} ")) from None
     if args.stats is not None:  # bad input now, not a failure after relaying; and never a file it reads (its
         # mission, trace, profile: params.inputs_read; the fleet's radio it writes in place)
         read = [*inputs_read().values(), *([args.radio] if args.radio else [])]

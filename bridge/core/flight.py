@@ -427,10 +427,10 @@ def noise_problem(estimators: Sequence[str], sensors: SensorConfig) -> str | Non
     return None
 
 
-def at_rest() -> Mission:
+def at_rest(duration_s: float = 86400.0) -> Mission:
     """What a bare ``bsst vehicle`` (or ``bsst relay`` without ``--mission``) flies: the paper
-    profile at rest at the origin; its tables are the command line's."""
-    return Mission(Step((Setpoint(0.0, 0.0, 0.0, 0.0, 0.0),)), duration_s=86400.0, name="vehicle",
+    profile at rest at the origin for ``duration_s`` (a day at most); its tables are the command line's."""
+    return Mission(Step((Setpoint(0.0, 0.0, 0.0, 0.0, 0.0),)), duration_s=min(duration_s, 86400.0), name="vehicle",
                    source="command line")
 
 
