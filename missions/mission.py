@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from numbers import Integral, Real
-from pathlib import Path
+from pathlib import Path, PurePath
 from typing import Any
 
 from missions.envelope import ENVELOPE_RADIUS_M, envelope_problem, ground_problem
@@ -270,6 +270,8 @@ def load_mission(path: str | Path, cap: StepCap | None = None, table: Mapping[st
     already), or a ground station's plan (:func:`is_plan_file`: flown with every other setting at its default). ``cap``:
     the control steps the command keeps (:class:`missions.steps.StepCap`): a mission over it is refused as soon as
     its length is known, a plan's before its trajectory is timed when even its least length is over."""
+    if not isinstance(path, str | PurePath):  # simulate(5), sweep(None): named, not os.fspath's bare TypeError
+        raise TypeError(f"mission: expected a Mission or a path to its file, got {path!r}"[:200])
     p = mission_path(path)
     if is_plan_file(p):
         return mission_from_plan(read_text_file(p, "a mission plan", PLAN_MAX_BYTES), str(p), p.stem, cap)

@@ -1,5 +1,6 @@
-"""Covers missions.mission, bridge.autopilot.params and params.text: a Mission built in Python is refused where a
-mission file is, by the file's own readers and ranges, naming the field as the file's key.
+"""Covers missions.mission, bridge.autopilot.params, bridge.record.outlock and params.text: a Mission built in
+Python is refused where a mission file is, by the file's own readers and ranges, naming the field as the file's
+key; a mission or ``out`` of the wrong type is a TypeError naming it.
 
 ``Mission(seed="x")``, ``Mission(Sine(psi=90), ...)``, a start's psi of 90, a set-point's text were taken (the seed
 failed later as ``link.seed``, a key the caller never gave; text in a sine failed deep in the law with a TypeError;
@@ -255,3 +256,19 @@ def test_a_switch_that_is_not_true_or_false_is_refused(tmp_path: Path, keywords:
         simulate(MISSION_DIR / "sine.toml", out=tmp_path / "run", **keywords)
     assert str(e.value) == said
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("call, said", [
+    (lambda: simulate(5), "mission: expected a Mission or a path to its file, got 5"),
+    (lambda: simulate(None), "mission: expected a Mission or a path to its file, got None"),
+    (lambda: load_mission(["missions/sine.toml"]), "mission: expected a Mission or a path to its file, got ['missions"),
+    (lambda: simulate(MISSION_DIR / "step.toml", out=5), "out: expected a directory's path, got 5"),
+    (lambda: simulate(MISSION_DIR / "step.toml", out=["runs/x"]), "out: expected a directory's path, got ['runs/x']"),
+])
+def test_a_mission_or_out_of_the_wrong_type_is_named(call, said: str) -> None:
+    """``simulate(5)``, ``sweep(None, ...)``, ``sitl(..., out=5)`` (every caller reads its mission by
+    ``load_mission`` and its directory by ``run_dir`` / ``out_held``) said ``expected str, bytes or os.PathLike
+    object, not int``, naming neither argument, until the third wave's forty-third session."""
+    with pytest.raises(TypeError) as caught:
+        call()
+    assert str(caught.value).startswith(said)

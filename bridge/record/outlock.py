@@ -57,6 +57,8 @@ def out_held(out: str | Path | None, flag: str = "--out") -> Iterator[None]:
     if out is None:
         yield
         return
+    if not isinstance(out, str | os.PathLike):  # a Python caller's out=5: named, not os.fspath's bare TypeError
+        raise TypeError(f"out: expected a directory's path, got {out!r}"[:200])
     check_out_dir(Path(out))  # (a path that cannot be a run directory: said as run_dir says it, not traced)
     try:
         real = str(Path(out).resolve())

@@ -81,8 +81,10 @@ def run_dir(
         while path.exists():
             n += 1
             path = Path(root) / f"{stamp}-{mission_name}-{n}"
-    else:
+    elif isinstance(out, str | os.PathLike):
         path = Path(out)
+    else:  # a Python caller's out=5: named, not os.fspath's bare TypeError
+        raise TypeError(f"out: expected a directory's path, got {out!r}"[:200])
     check_out_dir(path)
     if path.is_dir() and any(path.iterdir()):
         if not overwrite:
