@@ -246,7 +246,7 @@ def test_a_trace_of_one_record_is_refused_naming_the_file(tmp_path: Path, capsys
             "--out", str(tmp_path / "run"), *(["--link-trace-loop"] if loop else [])]
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"link.up.trace: {f} has {rows}; a trace needs at least 2" in err[0], err
+    assert len(err) == 1 and err[0].startswith(f"bsst: --link-trace {f} has {rows}; a trace needs at least 2"), err
     assert not (tmp_path / "run").exists()
     f.write_text(text.replace("0,25\n", "0,25\n0.1,25\n").replace("3,\n", "3,\n3.1,\n")
                  .replace("0,25,up\n", "0,25,up\n1,25,up\n"))
@@ -260,6 +260,28 @@ def test_a_trace_shorter_than_the_mission_is_refused_unless_it_loops(tmp_path: P
     assert link_from_table({"trace": str(f)}, "m.toml", duration_s=2.0).up.trace.records.n == 500
     run = simulate(SHORT, plots=False, link={"trace": str(f), "trace_loop": True})
     assert run.outcome == "completed" and run.summary["link"]["up"]["delay_ms"]["max"] == pytest.approx(5.0)
+
+
+def test_a_flags_trace_that_does_not_fit_the_flight_is_named_as_the_flag(tmp_path: Path, capsys) -> None:
+    """A trace ``--link-trace`` lays over a mission that is too short for it, or has no rows of a direction, is
+    refused naming the flag, not the mission's ``link.up.trace`` it does not hold (a Python caller's ``link=`` alike);
+    until the third wave's forty-third session: ``missions/sine.toml: link.up.trace: t.csv lasts 2 s ... (with these
+    laid over the mission's [link]: link.up.trace = ..., link.down.trace = ...)``."""
+    f = write_trace(tmp_path / "t.csv", {None: made(LinkConfig(delay_ms=5.0), seconds=2.0)})
+    down = tmp_path / "down.csv"
+    down.write_text("t_s,delay_ms,direction\n0,10,down\n100,10,down\n")
+    sine = str(ROOT / "missions" / "sine.toml")
+    for argv, said in (
+            (["--link-trace", f], f"bsst: --link-trace {f} lasts 2 s (500 up records), shorter than the mission "
+                                  "(30 s); loop it with trace_loop = true (--link-trace-loop) or give a longer trace"),
+            (["--down-link-trace", f], f"bsst: --down-link-trace {f} lasts 2 s (500 down records), shorter than"),
+            (["--up-link-trace", down], f"bsst: --up-link-trace {down} has no up rows (its direction column names "
+                                        "only down)")):
+        assert main(["sim", sine, *map(str, argv), "--out", str(tmp_path / "run")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(said) and "laid over" not in err[0], err
+    with pytest.raises(ConfigError, match=rf"^--link-trace {re.escape(str(f))} lasts 2 s"):
+        simulate(sine, link={"trace": str(f)})
 
 
 def test_composes_with_blackouts_duplication_reordering_and_a_bandwidth_cap(tmp_path: Path) -> None:

@@ -288,7 +288,8 @@ def _link_of(m: Mission, over: Overrides) -> LinkSettings:
     except ConfigError as exc:
         if not over.link or not Path(src).is_file():  # no file (bsst relay or vehicle without one, --await-mission,
             raise  # a Mission made in Python): no file's [link] to tell the overrides from
-        flagged = laid_file_problem(over.link)  # a trace or profile the flags gave, bad alone: the flag's
+        flagged = laid_file_problem(over.link) or _laid_trace_misfit(str(exc), src, over.link)  # a trace or
+        # profile the flags gave, bad alone or not fitting this flight: the flag's
         if flagged:
             raise ConfigError(flagged) from None
         # the file's [link] with the overrides over it: say them, or a user who gave --stop-after 40 reads that the
@@ -313,6 +314,21 @@ def laid_file_problem(link: Mapping[str, Any]) -> str | None:
                 read(path)
             except ConfigError as exc:
                 return f"{flag} {exc}"
+    return None
+
+
+def _laid_trace_misfit(line: str, src: str, link: Mapping[str, Any]) -> str | None:
+    """``line`` (a refusal of ``link.D.trace``: no rows of D, one, or shorter than the mission) named as the
+    flag that laid that trace over the mission (``--link-trace``, ``--up-link-trace``), not as the mission's key it
+    does not hold; None if the flags did not give it (``--link-trace t.csv`` read ``sine.toml: link.up.trace: ...``)."""
+    link = absolute_link_paths(link, Path("."))
+    sides = {d: t.get("trace") for d in DIRECTIONS if isinstance(t := link.get(d), Mapping)}
+    both = link.get("trace") or (sides.get("up") if sides.get("up") == sides.get("down") else None)
+    for d in DIRECTIONS:
+        path = both or sides.get(d)
+        head = f"{src}: link.{d}.trace: "
+        if isinstance(path, str) and path and line.startswith(f"{head}{path} "):
+            return f"{'--link-trace' if both else f'--{d}-link-trace'} {line[len(head):]}"
     return None
 
 
