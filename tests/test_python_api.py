@@ -272,3 +272,10 @@ def test_a_mission_or_out_of_the_wrong_type_is_named(call, said: str) -> None:
     with pytest.raises(TypeError) as caught:
         call()
     assert str(caught.value).startswith(said)
+
+
+def test_an_unknown_profile_laid_over_from_python_reads_as_the_flags_line() -> None:
+    """``simulate(m, link={"profile": "nope"})`` said ``--link-profile unknown link profile 'nope'`` (the flag's name
+    run into the message) until the third wave's forty-third session; it is the flag's own line now."""
+    with pytest.raises(ConfigError, match=r"^--link-profile: unknown link profile 'nope'; shipped profiles: lte, "):
+        simulate(MISSION_DIR / "step.toml", link={"profile": "nope"})

@@ -312,8 +312,8 @@ def laid_file_problem(link: Mapping[str, Any]) -> str | None:
         if isinstance(path, str) and path:
             try:
                 read(path)
-            except ConfigError as exc:
-                return f"{flag} {exc}"
+            except ConfigError as exc:  # (a file's line opens with its path; a profile's unknown name does not)
+                return f"{flag} {exc}" if str(exc).startswith(path) else f"{flag}: {exc}"
     return None
 
 
