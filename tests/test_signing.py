@@ -80,6 +80,14 @@ def test_a_directory_is_not_a_key(tmp_path):
         key_from_file(tmp_path)
 
 
+@pytest.mark.parametrize("given", [5, KEY, None])
+def test_a_key_that_is_no_path_is_named_never_shown(given):
+    """``sitl(m, key=KEY)`` (the secret itself, not its file) or ``key=5`` raised os.fspath's bare TypeError until the
+    third wave's forty-third session: it names ``key`` and the type now, never the value."""
+    with pytest.raises(TypeError, match=rf"^key: expected a signing key file's path, got {type(given).__name__}$"):
+        key_from_file(given)
+
+
 def test_signing_never_shows_its_key():
     s = Signing(KEY, 7)
     assert KEY.hex() not in repr(s) and str(KEY) not in repr(s)

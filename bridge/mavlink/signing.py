@@ -65,8 +65,11 @@ def key_from_file(path: str | os.PathLike[str], flag: str = "--key") -> bytes:
 
     Raises :class:`ConfigError` (exit 2 material, naming ``flag`` and the file, never its
     content) when the file is missing, not a regular file, readable or writable by others,
-    unreadable or empty.
+    unreadable or empty; a ``path`` that is no path (a Python caller's ``key=5``) is a TypeError naming ``key``.
     """
+    if not isinstance(path, str | os.PathLike):
+        raise TypeError(f"key: expected a signing key file's path, got {type(path).__name__}")  # (never the value:
+        # bytes here may be the secret itself)
     p = Path(path)
     try:
         st = p.stat()
