@@ -27,7 +27,8 @@ from typing import Any
 from bridge.autopilot.estimator import ESTIMATOR_KINDS
 from bridge.core.flight import Flight, prepare
 from bridge.core.overrides import Overrides
-from bridge.link.model import DIRECTIONS, NUMBER_RANGES, TRACE_EXCLUSIVE
+from bridge.link.model import DIRECTIONS, NUMBER_RANGES, TRACE_EXCLUSIVE, merge_link_tables
+from bridge.link.profile import load_link_profile
 from controller.law import DISCRETIZED, LawError
 from missions import MISSION_RANGES, Mission
 from missions.fleet import FLEET_RANGES
@@ -244,9 +245,12 @@ class Cell:
                         for a in (*AXES, "seed"))
 
 
-def mission_value(mission: Mission, axis: str) -> Any:
-    """The mission's own value of an axis (link axes: ``[link.up]``, else ``[link]``, else none; the
-    vehicle's: ``[estimator] kind`` and ``[sensors] noise_scale``, else their defaults)."""
+def mission_value(mission: Mission, axis: str, with_profile: bool = True) -> Any:
+    """The mission's own value of an axis (link axes: ``[link.up]``, else ``[link]``, laid over its link profile's
+    as the flight lays them (``with_profile``), else none; the vehicle's: ``[estimator] kind`` and ``[sensors]
+    noise_scale``, else their defaults). (A sweep over loss on ``--link-profile lte`` wrote delay_ms 0, jitter_ms 0
+    and burst_len 0 in every row and report.md, of flights at 35 ms, sigma 6, bursts of 5, until the third wave's
+    forty-third session.)"""
     if axis == "controller":
         return mission.controller
     if axis == "rate_hz":
@@ -267,8 +271,15 @@ def mission_value(mission: Mission, axis: str) -> Any:
     if axis == "turbulence":
         level = mission.wind.get("turbulence", "none")
         return level if isinstance(level, str) else "none"  # a bad level: prepare() names it
-    up = mission.link.get("up")
-    for table in (up if isinstance(up, Mapping) else {}, mission.link):
+    link = mission.link
+    profile = link.get("profile")
+    if with_profile and isinstance(profile, str) and profile:
+        try:
+            link = merge_link_tables(load_link_profile(profile).link, {k: v for k, v in link.items() if k != "profile"})
+        except ConfigError:  # (named where the cell's flight is prepared)
+            pass
+    up = link.get("up")
+    for table in (up if isinstance(up, Mapping) else {}, link):
         v = table.get(axis)
         if isinstance(v, (int, float)) and not isinstance(v, bool):
             return float(v)

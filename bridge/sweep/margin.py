@@ -277,7 +277,8 @@ def margin(mission: Mission | str | Path, over: str, until: Until | str, *, cont
     classes = classes or Classes()
     lo_range, top = RANGES[over]
     laws = list(controllers or (mission.controller,))
-    base = {a: float(mission_value(mission, a) or 0.0) for a in LINK_AXES}
+    base = {a: float(mission_value(mission, a, with_profile=False) or 0.0) for a in LINK_AXES}  # (a profile's
+    # delay is searched over: the probe's value replaces it)
     if over in LINK_AXES and base[over]:
         raise ConfigError(f"margin over {over}: the mission's [link] already sets {over} = {base[over]:g}; "
                           "search from a mission without it")
