@@ -284,6 +284,18 @@ def test_a_flags_trace_that_does_not_fit_the_flight_is_named_as_the_flag(tmp_pat
         simulate(sine, link={"trace": str(f)})
 
 
+def test_a_flags_profile_with_a_bad_key_names_its_file_and_key_alone(tmp_path: Path, capsys) -> None:
+    """``--link-profile p.toml`` whose ``[link]`` has a mistyped key is named by the profile's file and key, without
+    the "(with these laid over the mission's [link]: link.profile = ...)" that followed it until the third wave's
+    forty-third session: the mission's [link] was not where the key was wrong."""
+    prof = tmp_path / "p.toml"
+    prof.write_text('name = "p"\n[link]\ndelay = 20\n')
+    assert main(["sim", str(ROOT / "missions" / "sine.toml"), "--link-profile", str(prof), "--out",
+                 str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"bsst: {prof}: link.delay: unknown key in [link]; did you mean 'delay_ms'?"], err
+
+
 def test_composes_with_blackouts_duplication_reordering_and_a_bandwidth_cap(tmp_path: Path) -> None:
     rec = make_records([k * 0.01 for k in range(100)], [0.02] * 100)
     trace = DirectionTrace("t", rec)

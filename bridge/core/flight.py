@@ -292,6 +292,8 @@ def _link_of(m: Mission, over: Overrides) -> LinkSettings:
         # profile the flags gave, bad alone or not fitting this flight: the flag's
         if flagged:
             raise ConfigError(flagged) from None
+        if not str(exc).startswith(f"{src}: "):  # another file's key (the profile's own link.delay): what was laid
+            raise  # over the mission's [link] is not in it
         # the file's [link] with the overrides over it: say them, or a user who gave --stop-after 40 reads that the
         # file has a stop_ms it does not have
         laid = table_settings(over.link, "link")
