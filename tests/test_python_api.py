@@ -1,6 +1,6 @@
-"""Covers missions.mission, bridge.autopilot.params, bridge.record.outlock and params.text: a Mission built in
-Python is refused where a mission file is, by the file's own readers and ranges, naming the field as the file's
-key; a mission or ``out`` of the wrong type is a TypeError naming it.
+"""Covers missions.mission, bridge.autopilot.params, bridge.core.overrides, bridge.record.outlock and params.text: a
+Mission built in Python is refused where a mission file is, by the file's own readers and ranges, naming the field as
+the file's key; a mission or ``out`` of the wrong type is a TypeError naming it.
 
 ``Mission(seed="x")``, ``Mission(Sine(psi=90), ...)``, a start's psi of 90, a set-point's text were taken (the seed
 failed later as ``link.seed``, a key the caller never gave; text in a sine failed deep in the law with a TypeError;
@@ -279,3 +279,11 @@ def test_an_unknown_profile_laid_over_from_python_reads_as_the_flags_line() -> N
     run into the message) until the third wave's forty-third session; it is the flag's own line now."""
     with pytest.raises(ConfigError, match=r"^--link-profile: unknown link profile 'nope'; shipped profiles: lte, "):
         simulate(MISSION_DIR / "step.toml", link={"profile": "nope"})
+
+
+def test_a_sensor_set_given_by_name_is_told_the_table_it_means() -> None:
+    """``simulate(m, sensors="mocap")`` (as ``--sensors mocap``) was refused as ``expected a table (a mapping), got
+    'mocap'`` until the third wave's forty-third session, without the table it takes; it says ``{'set': 'mocap'}``."""
+    with pytest.raises(ConfigError, match=r"^overrides: sensors: expected a table \(a mapping: \{'set': 'mocap'\}, "
+                                          r"as --sensors mocap\), got 'mocap'$"):
+        simulate(MISSION_DIR / "step.toml", sensors="mocap")

@@ -114,7 +114,8 @@ class Overrides:
         _check_type("seed", self.seed, Integral, "an integer")
         for f in ("link", "failsafe", "sensors", "params"):
             v = getattr(self, f)
-            _check_type(f, v, Mapping, "a table (a mapping)")
+            _check_type(f, v, Mapping, f"a table (a mapping: {{'set': {v!r}}}, as --sensors {v})"
+                        if f == "sensors" and isinstance(v, str) else "a table (a mapping)")
             if v is not None:  # a copy: a caller's later change to its dict changes nothing here
                 object.__setattr__(self, f, dict(v))
         if self.params:  # each as its parameter's type (an INT32 an int), checked, named as the flag
