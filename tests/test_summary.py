@@ -165,6 +165,21 @@ def test_the_link_block_through_a_relay_and_without_statistics() -> None:
     assert bare["down"]["sent"] == 45 and bare["down"]["lost"] == 5
 
 
+def test_a_delay_no_message_measured_is_null_not_zero() -> None:
+    """A real-time run that ended before its first step (``--link-profile sik-57600``: the vehicle's failsafe at
+    t = 0) measured no per-step message: its ``delay_ms`` is null, printed ``n/a``, as offline's is. Until the third
+    wave's forty-third session it was 0 ms each, ``link up: ... delivered 114 ... delay p50 0.00 ms`` of a link whose
+    relay added 108 ms."""
+    side = {"sent": 119, "delivered": 114, "lost": 1, "duplicated": 0, "reordered": 41, "in_flight": 4,
+            "lost_by": {"random": 1}, "delay_ms": {"p50": 107.7}, "measured_ms": {"p50": 107.8}}
+    none = Joined()
+    link = link_block(none, {}, {}, {"up": side, "down": side})
+    assert link["up"]["delay_ms"] == link["down"]["delay_ms"] == {"p50": None, "p95": None, "p99": None, "max": None}
+    assert "delay p50 n/a ms p99 n/a ms max n/a ms" in link_lines(link)[0]
+    # in lockstep the socket's times, alike
+    assert link_block(none, VEHICLE_STATS, CONTROLLER_STATS, None)["up"]["socket_ms"]["p50"] is None
+
+
 def test_a_side_killed_without_tlogs_leaves_its_links_counts_unknown_and_says_why() -> None:
     """A vehicle killed (no stats) in a run with no readable pair of tlogs: neither direction can be counted, so
     both are null and ``unknown`` says why, printed as ``n/a`` (until the third wave's forty-second session the
