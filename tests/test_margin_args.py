@@ -1,5 +1,6 @@
-"""Covers bridge.sweep.margin: a Python caller's arguments to ``margin()`` are checked as ``bsst margin``'s flags are,
-before any cell flies: a ConfigError or TypeError naming the argument, never a search of nothing or a bare error.
+"""Covers bridge.sweep.margin, bridge.sweep.campaign and bridge.sweep.classes: a Python caller's arguments to
+``margin()`` and ``sweep()`` are checked as ``bsst margin``'s and ``bsst sweep``'s flags are, before any cell flies: a
+ConfigError or TypeError naming the argument, never a search of nothing or a bare error.
 
 A new user's script read ``margin(m, "delay_ms", Until(rms=0.1), seeds=0)`` as a margin of 60000 ms, the whole
 range, with no cell flown; ``controllers="smc"`` flew a law named 's'; ``until="rms=0.1"`` (the flag's text) raised
@@ -14,6 +15,7 @@ from typing import Any
 
 import pytest
 
+from bridge.sweep import Classes, Grid, sweep
 from bridge.sweep.margin import Until, margin
 from missions import Mission, Sine
 
@@ -68,3 +70,31 @@ def test_the_mission_may_be_its_path_and_anything_else_is_named() -> None:
         margin("missions/sine.toml", "noise", "rms=0.1")
     with pytest.raises(TypeError, match=r"^mission: expected a Mission or a path to its file, got None$"):
         margin(None, "delay_ms", "rms=0.1")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("kwargs, error, names", [
+    ({"classes": "strict"}, TypeError, "classes: expected a Classes or a mapping of its thresholds, got 'strict'"),
+    ({"classes": {"clean": 0.01}}, ValueError, "classes.clean: unknown threshold; allowed: clean_rms_m, "
+                                               "diverged_rms_m, ripple_u2"),
+    ({"classes": {"clean_rms_m": -1}}, ValueError, "classes.clean_rms_m: must be a positive number, got -1"),
+    ({"resume": "no"}, ValueError, "resume: expected True or False, got 'no'"),  # truthy: it resumed
+    ({"overwrite": 1}, ValueError, "overwrite: expected True or False, got 1"),
+    ({"report": "no"}, ValueError, "report: expected True or False, got 'no'"),
+    ({"client": 5}, TypeError, "client: expected a distributed.Client, got 5"),
+])
+def test_a_sweeps_bad_argument_is_named_before_any_flight(kwargs: dict[str, Any], error: type, names: str) -> None:
+    """``classes={"clean_rms_m": 0.01}`` raised ``AttributeError: 'dict' object has no attribute 'diverged_rms_m'``,
+    ``client=5`` ``'int' object has no attribute 'nthreads'``, and ``resume="no"`` resumed, until the third wave's
+    forty-third session."""
+    with pytest.raises(error) as caught:
+        sweep(SHORT, Grid(delay_ms=(0.0,)), **kwargs)
+    assert str(caught.value) == names
+    if "classes" in kwargs:  # margin() takes its classes alike
+        with pytest.raises(error) as caught:
+            margin(SHORT, "delay_ms", Until(rms=0.1), classes=kwargs["classes"])
+        assert str(caught.value) == names
+
+
+def test_classes_of_takes_a_mapping_of_thresholds() -> None:
+    assert Classes.of({"clean_rms_m": 0.01}) == Classes(clean_rms_m=0.01)
+    assert Classes.of(None) == Classes() and Classes.of(Classes(ripple_u2=5.0)) == Classes(ripple_u2=5.0)

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.core.interrupt import sigint_held
+from bridge.core.overrides import check_switches
 from bridge.record.outlock import holding_out
 from bridge.record.runlog import check_out_dir, run_dir, write_json_atomic
 from bridge.sweep.cells import (
@@ -69,7 +70,7 @@ def sweep(
     out: str | Path | None = None,
     resume: bool = False,
     overwrite: bool = False,
-    classes: Classes | None = None,
+    classes: Classes | Mapping[str, float] | None = None,
     progress: bool = False,
     report: bool = True,
     plots: bool = True,
@@ -96,8 +97,11 @@ def sweep(
     Worker processes import the calling script again: a script calls this under
     ``if __name__ == "__main__":`` (refused at once without it: :func:`~bridge.sweep.executors.check_main_guard`).
     """
+    check_switches(resume=resume, overwrite=overwrite, progress=progress, report=report, plots=plots)
+    if client is not None and not callable(getattr(client, "submit", None)):  # (5: AttributeError 'nthreads')
+        raise TypeError(f"client: expected a distributed.Client, got {client!r}"[:200])
     m = mission if isinstance(mission, Mission) else load_mission(mission)
-    spec = Sweep(m, Grid.of(grid), mode, classes or Classes(), max_cells=max_cells)
+    spec = Sweep(m, Grid.of(grid), mode, Classes.of(classes), max_cells=max_cells)
     res = run_sweep(spec, jobs=jobs, client=client, out=out, resume=resume, overwrite=overwrite, engine=engine,
                     progress=progress, report=report, plots=plots)
     if res.status == "all failed":

@@ -48,6 +48,21 @@ class Classes:
             raise ConfigError(f"classes.diverged_rms_m: {why}")
 
     @classmethod
+    def of(cls, value: object) -> Classes:
+        """A Python caller's ``classes=``: None (the defaults), a :class:`Classes`, or a mapping of its thresholds
+        (``{"clean_rms_m": 0.01}``; an unknown key named). Anything else is a TypeError naming ``classes`` (a dict
+        raised ``AttributeError: 'dict' object has no attribute 'diverged_rms_m'`` until the forty-third session)."""
+        if value is None or isinstance(value, Classes):
+            return value or cls()
+        if not isinstance(value, Mapping):
+            raise TypeError(f"classes: expected a Classes or a mapping of its thresholds, got {value!r}"[:200])
+        names = [f.name for f in fields(cls)]
+        unknown = [k for k in value if k not in names]
+        if unknown:
+            raise ConfigError(f"classes.{unknown[0]}: unknown threshold; allowed: {', '.join(names)}"[:200])
+        return cls(**value)
+
+    @classmethod
     def from_table(cls, t: Table) -> Classes:
         d = cls()
         values = {f.name: t.number(f.name, getattr(d, f.name), lo=0.0, lo_open=True, hi=1e9) for f in fields(cls)}

@@ -55,7 +55,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from numbers import Real
 from operator import itemgetter
@@ -255,8 +255,8 @@ def _called_with(mission: Mission | str | Path, until: Until | str, controllers:
 
 
 def margin(mission: Mission | str | Path, over: str, until: Until | str, *, controllers: Sequence[str] | None = None,
-           seeds: int = 1, resolution: float = 0.25, classes: Classes | None = None, jobs: int | None = None,
-           engine: str = "auto", progress: Callable[[str], None] | None = None,
+           seeds: int = 1, resolution: float = 0.25, classes: Classes | Mapping[str, float] | None = None,
+           jobs: int | None = None, engine: str = "auto", progress: Callable[[str], None] | None = None,
            below: float | None = None) -> dict[str, Any]:
     """Search the margin of each law, then check the band ``below`` it (default ``BELOW_STEPS`` x
     ``resolution``, 0: no check; see the module docstring); the ``margin.json`` content. Ctrl-C:
@@ -274,7 +274,7 @@ def margin(mission: Mission | str | Path, over: str, until: Until | str, *, cont
     if not (math.isfinite(below) and 0 <= below <= MAX_BELOW * resolution):
         raise ConfigError(f"--check-below must be in [0, {MAX_BELOW} x --resolution = {MAX_BELOW * resolution:g}] "
                           f"(at most {MAX_BELOW} values per law and seed), got {below:g}")
-    classes = classes or Classes()
+    classes = Classes.of(classes)
     lo_range, top = RANGES[over]
     laws = list(controllers or (mission.controller,))
     base = {a: float(mission_value(mission, a, with_profile=False) or 0.0) for a in LINK_AXES}  # (a profile's
