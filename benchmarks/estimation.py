@@ -74,8 +74,8 @@ def flight(mission: str, *, law: str = "bsst", kind: str = "ekf", sensors: str =
            link: dict[str, Any] | None = None, profile: str | None = None, seed: int = 0) -> dict[str, Any]:
     """One flight of the product's offline loop (``bsst sim`` without files); its figures and times."""
     w0, c0 = time.perf_counter(), time.process_time()
-    run = simulate(mission, plots=False, controller=law, seed=seed, profile=profile, sensors={"set": sensors},
-                   estimator=kind, link=link)
+    run = simulate(mission, plots=False, controller=law, seed=seed, profile=profile, estimator=kind, link=link,
+                   sensors=None if kind == "truth" else {"set": sensors})  # (the true state reads no sensor set)
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
     s, tr = run.summary, run.trace
     rate = float(s["rate_hz"])

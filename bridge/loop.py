@@ -39,7 +39,7 @@ from typing import Any
 from bridge.autopilot.intention import FAILSAFE_MODES, UserModeIntention
 from bridge.autopilot.simvehicle import FAILSAFE, LAND, OFFBOARD, SimVehicle
 from bridge.autopilot.vehicleevents import typed_fields
-from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.flight import Flight, Progress, laid_sensing_refusal, prepare
 from bridge.core.interrupt import Held, sigint_held
 from bridge.core.overrides import Overrides, check_switches
 from bridge.core.wire import command_over_wire, state_over_wire
@@ -58,7 +58,7 @@ from controller.link_guard import LinkGuard
 from missions import Mission, load_mission
 from missions.minsnap import Smooth
 from missions.references import Prefetched
-from params import reads_inputs
+from params import ConfigError, reads_inputs
 
 TOUCHDOWN_M = 0.05  # m above the ground, and m/s: a landing trajectory's end finds the vehicle down, and disarms it
 
@@ -118,6 +118,9 @@ def simulate(
     over = Overrides.of(overrides, **keywords)
     m = mission if isinstance(mission, Mission) else load_mission(mission, trace_cap(over.rate_hz))  # capped early
     flight = prepare(m, over)
+    refused = laid_sensing_refusal(over, flight)  # (a sweep's truth cells of a noise axis fly by fly(), not here)
+    if refused:
+        raise ConfigError(refused)
     check_trace_steps(flight.mission)  # before the run directory is made: a refused mission writes nothing
     with out_held(out):  # (another run writing this --out: refused before its files are touched)
         path = run_dir(out, flight.mission.name, overwrite) if (out is not None or write) else None

@@ -24,7 +24,7 @@ from bridge.loop import simulate
 from bridge.record.columns import ESTIMATE_COLUMNS, TRACE_COLUMNS
 from bridge.record.runlog import read_trace
 from bridge.session import instance_slot, sitl
-from missions import MISSION_DIR
+from missions import MISSION_DIR, load_mission
 from tests.sitlkit import ENV, ROOT, run_bsst
 
 # starts processes or opens sockets (not in make test-fast); flies the batch engine (its kernels loaded first)
@@ -48,8 +48,11 @@ def test_truth_and_ideal_sensors_leave_the_sine_unchanged():
     carries it, as in SITL: 2.41e-6 m with the paper's explicit step, asked for by name), bit for bit."""
     base = simulate(SINE, plots=False, discretization="explicit")
     assert 2.3e-6 < base.summary["rms_3d"] < 2.5e-6 and "estimation" not in base.summary
-    for kw in ({"sensors": {"set": "ideal"}}, {"estimator": "truth"}, {"sensors": {"set": "mocap"}, "noise": 2.0}):
-        run = simulate(SINE, plots=False, discretization="explicit", **kw)  # truth: the sensor set is not sampled
+    sine = load_mission(SINE)
+    # a mission's own [sensors] under truth (a caller's sensors= or noise= there is refused: it changes nothing)
+    for m, kw in ((sine.with_overrides(sensors={"set": "ideal"}), {}), (sine, {"estimator": "truth"}),
+                  (sine.with_overrides(sensors={"set": "mocap", "noise_scale": 2.0}), {})):
+        run = simulate(m, plots=False, discretization="explicit", **kw)  # truth: the sensor set is not sampled
         assert run.summary["rms_3d"] == base.summary["rms_3d"], kw
         assert all(np.array_equal(run.trace[c], base.trace[c], equal_nan=True) for c in TRACE_COLUMNS), kw
     for c, e in zip(("x", "vx", "psi", "dpsi"), ("x_est", "vx_est", "psi_est", "dpsi_est"), strict=True):

@@ -287,3 +287,19 @@ def test_a_sensor_set_given_by_name_is_told_the_table_it_means() -> None:
     with pytest.raises(ConfigError, match=r"^overrides: sensors: expected a table \(a mapping: \{'set': 'mocap'\}, "
                                           r"as --sensors mocap\), got 'mocap'$"):
         simulate(MISSION_DIR / "step.toml", sensors="mocap")
+
+
+@pytest.mark.parametrize("keywords, said", [
+    ({"noise": 5.0}, "noise = 5: the estimator is 'truth' (the true state: the sensors are not read), so noise "
+                     "changes nothing; give estimator='raw' or 'ekf' (or [estimator] kind)"),
+    ({"sensors": {"set": "gnss"}}, "sensors = {'set': 'gnss'}: the estimator is 'truth' (the true state: the sensors "
+                                   "are not read), so the sensor set changes nothing"),
+])
+def test_noise_or_a_sensor_set_a_truth_flight_does_not_read_is_refused_from_python(keywords: dict, said: str) -> None:
+    """``simulate(m, noise=5.0)`` on the true state flew byte for byte as without it, exit-free, where ``bsst sim
+    --noise 5`` is refused, until the third wave's forty-third session (docs/sensors.md)."""
+    with pytest.raises(ConfigError) as caught:
+        simulate(MISSION_DIR / "step.toml", **keywords)
+    assert str(caught.value).startswith(said)
+    assert simulate(Mission(Sine(), duration_s=0.2), estimator="raw", sensors={"set": "mocap"}, noise=2.0).outcome \
+        == "completed"  # read, so flown

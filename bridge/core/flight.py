@@ -433,6 +433,18 @@ def unread_problem(estimators: Sequence[str], what: str) -> str | None:
     return None
 
 
+def laid_sensing_refusal(over: Overrides, flight: Flight) -> str | None:
+    """The line refusing a Python caller's ``noise=`` or ``sensors=`` that the flight does not read (its estimator
+    ``truth``), as ``--noise`` / ``--sensors`` are refused (bridge.cli.options): ``simulate(m, noise=5.0)`` flew the
+    true state, byte for byte as without it, until the third wave's forty-third session; None."""
+    given = [f"noise = {over.noise:g}"] if over.noise is not None else []
+    given += [f"sensors = {dict(over.sensors)!r}"] if over.sensors and "set" in over.sensors else []
+    why = unread_problem((flight.estimator,), "noise" if over.noise is not None else "the sensor set")
+    if not (given and why):
+        return None
+    return f"{given[0]}: " + why.replace("--estimator raw or ekf", "estimator='raw' or 'ekf'")
+
+
 def noise_problem(estimators: Sequence[str], sensors: SensorConfig) -> str | None:
     """Why a noise scale would change nothing in flights with these estimator kinds and this sensor set
     (None if it does): every one is ``truth`` (:func:`unread_problem`), or the set has no noise to scale."""

@@ -63,7 +63,7 @@ from typing import Any
 
 from bridge.autopilot.estimator import compile_estimator
 from bridge.core.clock import lockstep_pace, realtime_speed_problem, speed_problem
-from bridge.core.flight import Flight, Progress, prepare
+from bridge.core.flight import Flight, Progress, laid_sensing_refusal, prepare
 from bridge.core.overrides import Overrides, check_switches
 from bridge.core.scalar import kernel_cache_on
 from bridge.mavlink.endpoint import GCS_PORT, LINK_PORT, parse_address
@@ -183,6 +183,9 @@ def sitl(
     over = Overrides.of(overrides, **keywords)
     m = mission if isinstance(mission, Mission) else load_mission(mission, trace_cap(over.rate_hz))  # capped early
     flight = prepare(m, over)
+    refused = laid_sensing_refusal(over, flight)  # noise= or sensors= that a truth flight does not read
+    if refused:
+        raise ConfigError(refused)
     check_trace_steps(flight.mission)  # the session keeps every trace row for its summary: a cap, said up front
     gcs_text = check_options(realtime=realtime, instance=instance, gcs=gcs, speed=speed)
     speed = lockstep_pace(speed, realtime=realtime, await_mission=await_mission)
