@@ -192,6 +192,20 @@ def test_in_the_main_thread_the_handler_and_the_wakeup_fd_are_put_back() -> None
     assert _wakeup_fd() == fd_before
 
 
+def test_a_sigint_whose_handler_has_run_is_in_the_first_at_once_and_counted_once() -> None:
+    """Python's handler has run (``raise_signal`` runs it before it returns): the first is done then, in the main
+    thread, whether the reader thread has read the wakeup fd's byte or not (a sweep checking it after its last cell
+    lost such a Ctrl-C, the reader not yet run); the reader's byte for it does not count a second."""
+    with sigint_futures() as sigint:
+        signal.raise_signal(signal.SIGINT)
+        assert sigint.first.done()
+    assert not sigint.second.done()  # (the block ended: its reader has read every byte)
+    with sigint_futures() as sigint:
+        signal.raise_signal(signal.SIGINT)
+        signal.raise_signal(signal.SIGINT)
+    assert sigint.first.done() and sigint.second.done()
+
+
 # The ``bsst`` console script's own lines (pyproject: bridge.__main__:main), with a hook that sends this process a real
 # SIGINT as the CLI's first submodule starts to load: Python raises KeyboardInterrupt inside the import.
 DURING_IMPORTS = """

@@ -2,9 +2,10 @@
 
 In:  SIGINT, while :func:`sigint_futures` is entered in the main thread; SIGTERM, within :func:`sigterm_as_sigint`
 Out: :class:`Interrupts`: a :class:`~concurrent.futures.Future` completed (its result: the signal number) at the
-     first SIGINT, another at the second; :func:`wait_or_interrupt`, concurrent.futures' ``wait`` that raises
-     KeyboardInterrupt once it has returned; :func:`sigint_deferred`: SIGINT raised only inside
-     :meth:`Deferred.raising` blocks (where a search flies), noted elsewhere (its bookkeeping); :func:`ignore_sigint`:
+     first SIGINT, another at the second (each exact once the block has ended); :func:`wait_or_interrupt`,
+     concurrent.futures' ``wait`` that raises KeyboardInterrupt once it has returned; :func:`sigint_deferred`:
+     SIGINT raised only inside :meth:`Deferred.raising` blocks (where a search flies), noted elsewhere (its
+     bookkeeping); :func:`ignore_sigint`:
      a command whose result is final ignores SIGINT from there on (its write, its summary, the interpreter's exit);
      :func:`sigterm_as_sigint`: SIGTERM taken as a Ctrl-C (:func:`as_sigint`, the handler); :func:`sigint_held`: the
      KeyboardInterrupt of a SIGINT held (:class:`Held`) while work that must not be cut runs (a flight's record)
@@ -22,6 +23,10 @@ Why:
 - So a thread here reads the bytes that CPython's C handler writes to the wakeup fd
   (:func:`signal.set_wakeup_fd`) at the very signal, whichever thread it lands on, and completes the futures:
   the waiting code wakes at once and raises where no lock is held.
+- Python's own handler completes the first as well, where the reader may not have run yet: a sweep that checked
+  the first in the main thread after its last cell, its handler run but its reader not, lost that Ctrl-C (said by
+  nobody; 3 in 9 runs of tests/test_sweep_resume.py). Read once the block has ended (its reader joined), both
+  futures hold every SIGINT that came in it.
 - The two futures live for the whole block, so the second Ctrl-C is counted wherever it lands (it used to raise
   KeyboardInterrupt anywhere in the code between the first's handling and the wait for the second). From the
   second on, the previous handler is back: a third Ctrl-C interrupts at once, as Python would.
@@ -49,7 +54,7 @@ import os
 import signal
 import threading
 from collections.abc import Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, Future, wait
+from concurrent.futures import FIRST_COMPLETED, Future, InvalidStateError, wait
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
@@ -91,6 +96,7 @@ def sigint_futures() -> Iterator[Interrupts]:
     def on_sigint(signum: int, frame: Any) -> None:  # runs late (see Why): the futures do not wait for it
         nonlocal handled
         handled += 1  # (two SIGINTs before it runs are one call: the reader's count decides too)
+        _complete(got.first)  # (the reader may not have run yet: a check in the main thread sees it at once)
         if handled >= 2 or got.second.done():
             signal.signal(signal.SIGINT, previous)
 
@@ -101,7 +107,7 @@ def sigint_futures() -> Iterator[Interrupts]:
             if byte == _STOP or not byte:
                 return
             if byte[0] == signal.SIGINT:
-                pending.pop(0).set_result(signal.SIGINT)
+                _complete(pending.pop(0))  # (the first's: perhaps completed by on_sigint already)
 
     reader = threading.Thread(target=read, name="sigint-watch", daemon=True)
     reader.start()
@@ -121,6 +127,14 @@ def sigint_futures() -> Iterator[Interrupts]:
         reader.join()
         os.close(read_end)
         os.close(write_end)
+
+
+def _complete(stop: Future) -> None:
+    """``stop`` completed with SIGINT, unless it is already (the handler and the reader each complete the first)."""
+    try:
+        stop.set_result(signal.SIGINT)
+    except InvalidStateError:
+        pass
 
 
 def wait_or_interrupt(futures: Iterable[Future], interrupted: Future) -> set[Future]:

@@ -267,8 +267,8 @@ def run_local(mission: Mission, todo: Sequence[Cell], mode: str, jobs: int, repo
                 _fly_alone(mission, suspects.popleft(), mode, report, sigint, name)
                 continue
             _fly_in_pool(mission, queue, suspects, mode, jobs, report, sigint, name)
-        if sigint.first.done():  # taken after the last wait: not lost
-            raise KeyboardInterrupt
+    if sigint.first.done():  # taken after the last wait (read once the block has read every SIGINT): not lost
+        raise KeyboardInterrupt
 
 
 def _fly_alone(mission: Mission, cell: Cell, mode: str, report: Report, sigint: Interrupts, name: str) -> None:
