@@ -117,7 +117,8 @@ class EndFlying(RealtimeFlying):
                 self.reason = "the vehicle did not land and disarm after the mission" if late else \
                     f"vehicle silent for {self.cfg.vehicle_timeout_s:g} s while landing"
                 return False
-            for _, m, _addr in wait((self.ep,), min(deadline, self._next_house), self.spinner):
+            # (real time polls for nothing: its states come on the wall clock, not as answers)
+            for _, m, _addr in wait((self.ep,), min(deadline, self._next_house), self.spinner if lockstep else None):
                 self._on(m)
             odo, self._odo = self._odo, None
             if lockstep and odo is not None and self.vehicle_armed and usec is not None and odo.time_usec >= usec:
