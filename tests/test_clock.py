@@ -73,3 +73,23 @@ def test_what_a_stalled_vehicle_read_late_waits_for_the_physics_to_catch_up_to_w
     assert c.release(pace.due(200)) == ["read at 0.200"] and c.release(pace.due(201)) == []
     assert c.stalls.report()["count"] == 1  # the catch-up's late steps are the one stall
     assert c.overslept(pace.due(300), 0.4, []) and c.release(10.0) == []  # an empty wait holds nothing
+
+
+def test_a_vehicle_that_sleeps_to_its_periods_end_flies_the_steps_due_meanwhile_and_no_stall():
+    """Real time, 4 physics steps a 4 ms control period: mid-period the vehicle sleeps to the period's end (or a
+    message), not to each step. Woken at the end, the steps due before it are late by choice, not a stall; what a
+    wait read after its step was due waits for the first step due after it was read, as a wake per step had it."""
+    pace = Pace(rate_hz=1000.0)
+    pace.restart(now=0.0, n=0)
+    c = CatchUp(pace)
+    c.asleep_to = pace.due(4)  # the wait for step 1 slept to the period's end
+    assert not c.overslept(pace.due(1), 0.0005, ["target"], True)  # read before step 1 was due: taken now
+    assert c.overslept(pace.due(1), 0.0041, ["read at 4.1 ms"], True)  # woke after step 1's due: held
+    for n in (1, 2, 3, 4):  # the steps due by the wake, flown then: none takes it, none is a stall
+        c.woke(pace.due(n), 0.0041 + n * 1e-5)
+        assert c.release(pace.due(n)) == []
+    assert c.release(pace.due(5)) == ["read at 4.1 ms"]
+    assert c.stalls.report()["count"] == 0
+    c.asleep_to = pace.due(8)  # the next period's: it woke 20 ms after the end it slept for, a stall from there
+    c.woke(pace.due(6), pace.due(8) + 2 * STALL_S)
+    assert c.stalls.report() == {"count": 1, "worst_ms": 20.0, "at": [[0.008, 20.0]]}

@@ -15,6 +15,7 @@ not come: flown over a 100 ms catch-up it turned a stall into a kick).
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from bridge.core.clock import STALL_S, Pace, Stalls
@@ -27,16 +28,22 @@ class CatchUp:
         self.pace = pace
         self.stalls = Stalls()
         self._held: list[tuple[float, list[Any]]] = []  # (wall time read, what the wait returned), oldest first
+        # wall time the last wait was to sleep to: one past the steps' dues (to a control period's end) flies the
+        # steps due by its wake then, late by choice, not by a stall
+        self.asleep_to = -math.inf
 
     def woke(self, due: float, now: float) -> None:
-        """The physics step due at wall time ``due`` is taken at ``now``: a stall if more than STALL_S late."""
+        """The physics step due at wall time ``due`` is taken at ``now``: a stall if more than STALL_S late (after
+        its due, or after the wake the vehicle slept for if that is later)."""
+        due = max(due, self.asleep_to)
         if now - due > STALL_S:  # (the clock's time only then: this is every physics step's path)
             self.stalls.note(self.pace.time_s(due), now - due)
 
-    def overslept(self, due: float, now: float, got: list[Any]) -> bool:
+    def overslept(self, due: float, now: float, got: list[Any], past_due: bool = False) -> bool:
         """A wait for the step due at ``due`` returned ``got`` at ``now``: held (True) if it overslept, the
-        machine having stalled it, else left to the caller (False)."""
-        if now - due <= STALL_S:
+        machine having stalled it, or (``past_due``: it slept past ``due`` by choice) if it returned after ``due``;
+        else left to the caller (False)."""
+        if now - max(due, self.asleep_to) <= STALL_S and not (past_due and now >= due):
             return False
         if got:
             self._held.append((now, got))

@@ -310,11 +310,14 @@ class Vehicle:
                                    self._estimate)
         self._n = n0
         hold = self.cfg.clock == "lockstep"
+        # real time sleeps to the period's end (or a message): the steps due by a wake are flown then, and what
+        # it read waits for the first one due after (CatchUp), as it did when each step woke the vehicle
+        end = None if hold else self.pace.due(n0 + self.substeps)
 
         def deliver(_t: float) -> None:
             # called before each physics step: wait for its wall time, taking targets meanwhile
             if self._n > n0:
-                self._wait_until(self.pace.due(self._n), hold=hold)
+                self._wait_until(self.pace.due(self._n), hold=hold, until=end)
             self._n += 1
 
         self.sim.advance(deliver)
@@ -339,10 +342,11 @@ class Vehicle:
         for ep, m, addr in held:
             self._handle(ep, m, addr)
 
-    def _wait_until(self, due: float, hold: bool = False) -> bool:
+    def _wait_until(self, due: float, hold: bool = False, until: float | None = None) -> bool:
         """Serve the links until wall time ``due`` of the pace; False if stopping. Real time catches every stall
         up (the controller's schedule is the wall's); a paced lockstep far behind is re-based, not caught up.
-        ``hold`` (lockstep, running free mid-period): the links' messages are taken by :meth:`_take_mid_period`."""
+        ``hold`` (lockstep, running free mid-period): the links' messages are taken by :meth:`_take_mid_period`.
+        ``until`` (real time, mid-period): sleep to then, not to ``due``, unless a message comes first."""
         now = time.monotonic()
         realtime = self.cfg.clock == "realtime"
         take = self._take_mid_period if hold else self._handle
@@ -355,11 +359,14 @@ class Vehicle:
         while not self.stopping:
             if now >= due:
                 return True
-            got = wait(self.endpoints, min(due, self._next_house))
+            self.catchup.asleep_to = deadline = min(due if until is None else until, self._next_house)
+            got = wait(self.endpoints, deadline)
             now = time.monotonic()
-            if not (realtime and self.catchup.overslept(due, now, got)):
+            if not (realtime and self.catchup.overslept(due, now, got, until is not None)):
                 for ep, m, addr in got:
                     take(ep, m, addr)
+            elif until is not None and now >= due:  # (its duties after the steps owed: at the next wait)
+                continue
             if now >= self._next_house:
                 self._housekeeping(take)
         return False
