@@ -1,10 +1,11 @@
 """CPU a lockstep step costs each child of a real session, its recording, streams and wake-ups included.
 
 In:  trees to compare (``--tree PATH``, repeatable; default this one), ``--rounds``, the mission (default the
-     sine), the vehicle's ``--gcs`` (default none, as a session with no instance)
+     sine), the vehicle's ``--gcs`` (default none, as a session with no instance), ``--realtime``
 Out: per tree and side (vehicle, controller): the CPU of one lockstep step (us: user + system, and system
      alone), the median over rounds of (the mission's CPU - the CPU of the same mission cut to 2 s) / (its
-     steps - 500); the load average
+     steps - 500); with ``--realtime``, both sides on the wall clock, that as CPU ms per second of flight; the load
+     average
 
 ``benchmarks/step_work.py`` measures each side's own work with the other side's message already waiting;
 this flies both sides as ``bsst sitl`` does in lockstep (``bsst vehicle --lockstep --speed 0`` and ``bsst
@@ -12,9 +13,11 @@ controller``, each exec'd from the tree on ``PYTHONPATH``, both recording with `
 pays its sleep in ``select``, its wake-up and the caches the other process used (docs/figures.md, the
 forty-first session: ~55-75 us a step a side at load 2-4). Each child's CPU is its own ``wait4`` rusage;
 the 2 s flight cancels the start-up, the take-off and the landing. The trees' runs alternate round by round.
+``--realtime`` flies them as ``bsst sitl --realtime`` does (``--realtime`` on both): what a second of a real-time
+flight costs each side (docs/figures.md, the forty-third session).
 
     .venv/bin/python benchmarks/session_cpu.py [--tree /path/to/other/tree] [--tree .] [--rounds 3]
-        [--mission missions/sine.toml] [--gcs none]
+        [--mission missions/sine.toml] [--gcs none] [--realtime]
 """
 
 from __future__ import annotations
@@ -60,8 +63,9 @@ def _rusage(proc: subprocess.Popen[bytes]) -> tuple[float, float]:
     return ru.ru_utime + ru.ru_stime, ru.ru_stime
 
 
-def fly(tree: str, mission: Path, gcs: str) -> dict[str, tuple[float, float]]:
-    """One lockstep flight of ``mission`` by ``tree``'s children: each side's (CPU s, system CPU s)."""
+def fly(tree: str, mission: Path, gcs: str, realtime: bool = False) -> dict[str, tuple[float, float]]:
+    """One lockstep (or real-time) flight of ``mission`` by ``tree``'s children: each side's (CPU s, system CPU s)."""
+    clock = ["--realtime"] if realtime else ["--lockstep", "--speed", "0"]
     env = dict(os.environ, PYTHONPATH=tree)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
     py = [sys.executable, "-m", "bridge"]
@@ -69,11 +73,12 @@ def fly(tree: str, mission: Path, gcs: str) -> dict[str, tuple[float, float]]:
         t = Path(tmp)
         with open(t / "vehicle.out", "wb") as f:
             veh = subprocess.Popen([*py, "vehicle", str(mission), "--listen", "127.0.0.1:0", "--gcs", gcs,
-                                    "--lockstep", "--speed", "0", "--out", str(t / "v")], stdout=f,
+                                    *clock, "--out", str(t / "v")], stdout=f,
                                    stderr=subprocess.DEVNULL, env=env, cwd=tree)
         try:
             port = _ready_port(t / "vehicle.out", veh)
-            ctl = subprocess.Popen([*py, "controller", str(mission), "--vehicle", port, "--out", str(t / "c")],
+            ctl = subprocess.Popen([*py, "controller", str(mission), "--vehicle", port, "--out", str(t / "c"),
+                                    *clock[:1 if realtime else 0]],
                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=tree)
             c = _rusage(ctl)
             veh.terminate()  # (the controller saw it land: its flight is over)
@@ -91,6 +96,7 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--mission", default=str(ROOT / "missions" / "sine.toml"))
     ap.add_argument("--gcs", default="none", help="the vehicle's --gcs (default none)")
+    ap.add_argument("--realtime", action="store_true", help="fly on the wall clock: CPU ms per second of flight")
     args = ap.parse_args()
     trees = [str(Path(t).resolve()) for t in (args.tree or [str(ROOT)])]
     mission = Path(args.mission).resolve()
@@ -109,16 +115,18 @@ def main() -> int:
             raise SystemExit(f"{mission}: could not cut its duration_s line to {SHORT_S:g} s")
         for _ in range(args.rounds):
             for t in trees:
-                long, cut = fly(t, mission, args.gcs), fly(t, short, args.gcs)
+                long, cut = fly(t, mission, args.gcs, args.realtime), fly(t, short, args.gcs, args.realtime)
                 for side in sides:
                     got[(t, side)].append(((long[side][0] - cut[side][0]) / steps * 1e6,
                                            (long[side][1] - cut[side][1]) / steps * 1e6))
-    print(f"load {os.getloadavg()[0]:.2f} (1 min) after {args.rounds} rounds; CPU a lockstep step (us), "
+    scale, unit = (rate / 1000.0, "CPU ms a second of real-time flight") if args.realtime else \
+        (1.0, "CPU a lockstep step (us)")
+    print(f"load {os.getloadavg()[0]:.2f} (1 min) after {args.rounds} rounds; {unit}, "
           f"{mission.name} ({duration:g} s) - the same cut to {SHORT_S:g} s, over {steps} steps")
     for (t, side), runs in got.items():
-        every = ", ".join(f"{a:.0f}" for a, _ in runs)
-        print(f"{t}  {side:10s} median {statistics.median(a for a, _ in runs):6.1f} (system "
-              f"{statistics.median(s for _, s in runs):5.1f})  rounds: {every}")
+        every = ", ".join(f"{a * scale:.0f}" for a, _ in runs)
+        print(f"{t}  {side:10s} median {statistics.median(a for a, _ in runs) * scale:6.1f} (system "
+              f"{statistics.median(s for _, s in runs) * scale:5.1f})  rounds: {every}")
     return 0
 
 
