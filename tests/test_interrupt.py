@@ -18,6 +18,7 @@ import subprocess
 import sys
 import textwrap
 import threading
+from concurrent.futures import FIRST_COMPLETED, Future, wait
 from pathlib import Path
 
 import pytest
@@ -204,6 +205,32 @@ def test_a_sigint_whose_handler_has_run_is_in_the_first_at_once_and_counted_once
         signal.raise_signal(signal.SIGINT)
         signal.raise_signal(signal.SIGINT)
     assert sigint.first.done() and sigint.second.done()
+
+
+def test_a_sigint_handled_inside_a_waits_hold_on_the_first_still_wakes_that_wait() -> None:
+    """``concurrent.futures.wait`` holds each future's lock from its look at which are done to its waiter's install:
+    Python's handler, run in the main thread there, completed the first under that (reentrant) lock after the look,
+    before the waiter was on it, and no one woke that waiter (the reader's byte found the first done): the wait
+    slept on until another future ended, a sweep's Ctrl-C held up by its longest cell. The handler leaves it to the
+    reader there, whose completion takes the lock once the waiter is on. Here the SIGINT is raised as the wait puts
+    its waiter on a future it installs before the first (after its look), and the wait must wake with the first."""
+    with sigint_futures() as sigint:
+        futures = {sigint.first}
+        while (order := list(set(futures)))[0] is sigint.first:  # the wait installs its waiter on each in this order
+            futures.add(Future())
+        before = order[0]  # (installed on before the first)
+        tripped: list[bool] = []
+
+        class Waiters(list):  # the waiter's install on ``before``: a SIGINT, the wait holding the first's lock
+            def append(self, waiter: object) -> None:
+                super().append(waiter)
+                if not tripped and sigint.first._condition._is_owned():
+                    tripped.append(True)
+                    signal.raise_signal(signal.SIGINT)  # its handler runs before this returns
+
+        before._waiters = Waiters()  # type: ignore[attr-defined]
+        done, _ = wait(futures, timeout=10, return_when=FIRST_COMPLETED)
+    assert tripped and sigint.first in done, (tripped, done)
 
 
 # The ``bsst`` console script's own lines (pyproject: bridge.__main__:main), with a hook that sends this process a real

@@ -26,7 +26,9 @@ Why:
 - Python's own handler completes the first as well, where the reader may not have run yet: a sweep that checked
   the first in the main thread after its last cell, its handler run but its reader not, lost that Ctrl-C (said by
   nobody; 3 in 9 runs of tests/test_sweep_resume.py). Read once the block has ended (its reader joined), both
-  futures hold every SIGINT that came in it.
+  futures hold every SIGINT that came in it. Not where the main thread holds the first's lock (inside
+  concurrent.futures.wait): completed there, under the reentrant lock, before the wait's waiter was on it, that
+  wait slept until another future ended (a sweep's Ctrl-C held up by its longest cell); the reader completes it.
 - The two futures live for the whole block, so the second Ctrl-C is counted wherever it lands (it used to raise
   KeyboardInterrupt anywhere in the code between the first's handling and the wait for the second). From the
   second on, the previous handler is back: a third Ctrl-C interrupts at once, as Python would.
@@ -96,7 +98,11 @@ def sigint_futures() -> Iterator[Interrupts]:
     def on_sigint(signum: int, frame: Any) -> None:  # runs late (see Why): the futures do not wait for it
         nonlocal handled
         handled += 1  # (two SIGINTs before it runs are one call: the reader's count decides too)
-        _complete(got.first)  # (the reader may not have run yet: a check in the main thread sees it at once)
+        # (the reader may not have run yet: a check in the main thread sees it at once) but not under the first's
+        # lock, which this thread holds inside concurrent.futures.wait from its look to its waiter's install (the
+        # lock is reentrant: completed there, that waiter was never woken); the reader's completion waits for it
+        if not got.first._condition._is_owned():  # (private: the one way to ask a Condition who holds it)
+            _complete(got.first)
         if handled >= 2 or got.second.done():
             signal.signal(signal.SIGINT, previous)
 
