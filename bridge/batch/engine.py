@@ -155,7 +155,8 @@ class _Batch:
 def _fly_blocks(c: Constants, a: Cells, steps: int, jobs: int, report: Callable[[int, int], None]) -> None:
     """Fly every cell's whole flight, :data:`BLOCK_CELLS` at a time, on ``jobs`` threads (the kernel runs
     without the GIL); report (cells done, cells) as blocks end. Blocks are handed out as threads come
-    free, so a core slowed by other work takes fewer; each cell flies alone, so the rows are the same."""
+    free, so a core slowed by other work takes fewer; each cell flies alone, so the rows are the same. A Ctrl-C
+    raises KeyboardInterrupt, one after the last block's wait too (as :func:`bridge.sweep.executors.run_local`)."""
     n = a.X.shape[0]
     blocks = [(lo, min(n, lo + BLOCK_CELLS)) for lo in range(0, n, BLOCK_CELLS)]
     done = 0
@@ -177,6 +178,8 @@ def _fly_blocks(c: Constants, a: Cells, steps: int, jobs: int, report: Callable[
         finally:
             for f in running:
                 f.cancel()
+    if sigint.first.done():  # taken after the last wait (read once the block has read every SIGINT): not lost
+        raise KeyboardInterrupt
 
 
 def _references(m: Mission, times: np.ndarray) -> np.ndarray:
