@@ -133,7 +133,7 @@ def pool_workers(group: int) -> list[int]:
     are its children's children (a few reads of /proc/PID/task/TID/children: a test polls this every 10 ms, and a
     scan of /proc reads every process's stat, ~4 ms a call with 80 processes on the machine, more in a loaded suite);
     once it has ended, those left in its group (a dying sweep's orphans) are found by that scan."""
-    if _state(group) not in (None, "Z"):
+    if process_state(group) not in (None, "Z"):
         return [w for child in _children(group) for w in _children(child) if _stat(w)[2:3] == [str(group)]]
     parents = {}
     for entry in Path("/proc").iterdir():
@@ -152,7 +152,7 @@ def _stat(pid: int | str) -> list[str]:
         return []
 
 
-def _state(pid: int) -> str | None:
+def process_state(pid: int) -> str | None:
     """Process ``pid``'s state letter (``Z``: ended, not reaped), None if it is gone."""
     return (_stat(pid) or [None])[0]
 

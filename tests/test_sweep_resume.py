@@ -22,7 +22,7 @@ from bridge.sweep.cells import CELLS_CSV, read_cells
 from bridge.sweep.inputs import file_sha256, input_hashes
 from missions import Mission, Sine
 from params import dump_toml
-from tests.sitlkit import ROOT, Bsst, pool_workers
+from tests.sitlkit import ROOT, Bsst, pool_workers, process_state
 from tests.waiting import sweep_said, wait_for
 
 # starts processes (not in make test-fast); flies the batch engine (its kernels loaded first)
@@ -90,6 +90,7 @@ def _stopped(proc: Any, stop: str, first: Callable[[], Any], look: Callable[[], 
         value = first()
         if look is not None:
             os.killpg(proc.pid, signal.SIGSTOP)
+            wait_for(lambda: process_state(proc.pid) in ("T", "Z", None), 10, "the sweep held still (SIGSTOP)")
             value = (value, look())
         if stop == "ctrl-c":
             os.killpg(proc.pid, signal.SIGINT)

@@ -23,12 +23,14 @@ Why:
 - So a thread here reads the bytes that CPython's C handler writes to the wakeup fd
   (:func:`signal.set_wakeup_fd`) at the very signal, whichever thread it lands on, and completes the futures:
   the waiting code wakes at once and raises where no lock is held.
-- Python's own handler completes the first as well, where the reader may not have run yet: a sweep that checked
-  the first in the main thread after its last cell, its handler run but its reader not, lost that Ctrl-C (said by
-  nobody; 3 in 9 runs of tests/test_sweep_resume.py). Read once the block has ended (its reader joined), both
-  futures hold every SIGINT that came in it. Not where the main thread holds the first's lock (inside
-  concurrent.futures.wait): completed there, under the reentrant lock, before the wait's waiter was on it, that
-  wait slept until another future ended (a sweep's Ctrl-C held up by its longest cell); the reader completes it.
+- Read once the block has ended (its reader joined), both futures hold every SIGINT that came in it; inside it,
+  the first may still wait for the reader (a check in the main thread just after the handler ran can miss it). A
+  sweep checked it there after its last cell and lost that Ctrl-C (said by nobody; 3 in 9 runs of
+  tests/test_sweep_resume.py): checked after the block now. Python's own handler does not complete the futures:
+  it runs in the main thread, also inside concurrent.futures.wait while that holds the futures' (reentrant) locks
+  between its look at which are done and its waiter's install, and a future completed there never woke that wait
+  (a sweep's Ctrl-C held up by its longest cell). Only a SIGINT that meets it after the wakeup fd is put back, as
+  the block ends, is completed by it, then.
 - The two futures live for the whole block, so the second Ctrl-C is counted wherever it lands (it used to raise
   KeyboardInterrupt anywhere in the code between the first's handling and the wait for the second). From the
   second on, the previous handler is back: a third Ctrl-C interrupts at once, as Python would.
@@ -98,11 +100,6 @@ def sigint_futures() -> Iterator[Interrupts]:
     def on_sigint(signum: int, frame: Any) -> None:  # runs late (see Why): the futures do not wait for it
         nonlocal handled
         handled += 1  # (two SIGINTs before it runs are one call: the reader's count decides too)
-        # (the reader may not have run yet: a check in the main thread sees it at once) but not under the first's
-        # lock, which this thread holds inside concurrent.futures.wait from its look to its waiter's install (the
-        # lock is reentrant: completed there, that waiter was never woken); the reader's completion waits for it
-        if not got.first._condition._is_owned():  # (private: the one way to ask a Condition who holds it)
-            _complete(got.first)
         if handled >= 2 or got.second.done():
             signal.signal(signal.SIGINT, previous)
 
@@ -113,7 +110,7 @@ def sigint_futures() -> Iterator[Interrupts]:
             if byte == _STOP or not byte:
                 return
             if byte[0] == signal.SIGINT:
-                _complete(pending.pop(0))  # (the first's: perhaps completed by on_sigint already)
+                _complete(pending.pop(0))
 
     reader = threading.Thread(target=read, name="sigint-watch", daemon=True)
     reader.start()
@@ -133,10 +130,12 @@ def sigint_futures() -> Iterator[Interrupts]:
         reader.join()
         os.close(read_end)
         os.close(write_end)
+        if handled and not got.first.done():  # its handler ran after the wakeup fd was put back: no byte (Why)
+            _complete(got.first)
 
 
 def _complete(stop: Future) -> None:
-    """``stop`` completed with SIGINT, unless it is already (the handler and the reader each complete the first)."""
+    """``stop`` completed with SIGINT, unless it is already (the block's end completes a first the reader did not)."""
     try:
         stop.set_result(signal.SIGINT)
     except InvalidStateError:
