@@ -22,6 +22,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.link.trace import read_trace
 from bridge.record.linkblock import Cut, cut_counts
 from bridge.record.linkextract import step_delays, step_records
+from bridge.record.tlogmatch import DirectionRecords, merge_directions
 from tests.sitlkit import ENV, ROOT, run_bsst
 from tests.test_link_trace import _frame, _tlog
 
@@ -217,3 +218,12 @@ def test_a_killed_sides_link_counts_its_reordered_messages_from_the_tlogs_order(
                          "went with its stats, so what that model lost, duplicated or held back is not in these "
                          "counts"), said
     assert "link model" not in cut_counts("down", Cut("vehicle", "killed by SIGKILL", both, modelled=True))["counted"]
+
+
+def test_reordered_over_sources_is_their_sum_or_unknown_if_one_is() -> None:
+    """Merged over a direction's sources, ``reordered`` is the sum of each source's count; one source not counted
+    (None) makes it unknown, not the others' sum passed off as the whole (a review's finding)."""
+    counted = [DirectionRecords(reordered=2), DirectionRecords(reordered=3)]
+    assert merge_directions(counted).reordered == 5
+    assert merge_directions([*counted, DirectionRecords(reordered=None)]).reordered is None
+    assert merge_directions([]).reordered is None

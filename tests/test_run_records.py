@@ -306,8 +306,8 @@ def test_a_realtime_sessions_notes_are_not_before_the_disarm_that_ended_it(tmp_p
     and its trace ends there. That last row is stamped at its control period's start, the disarm at the physics step
     it happened in, within that period: the closing notes, at the last row, came up to a period before the disarm
     they follow (``ended`` at 2.704 s, the disarm at 2.705 s) until the third wave's fortieth session. They are at
-    the disarm now, in summary.json and events.log. (A 3.5 s mission, the link back at 3.2 s: the session runs to the
-    mission's end on the wall clock, 5 s and a link back at 4 s before, which nothing read.)"""
+    the disarm now, in summary.json and events.log. (A 3.5 s mission, the link back at 3.2 s, where it was 5 s and 4 s,
+    which nothing read: the session ends at the disarm now, its controller ending once the failsafe disarmed it.)"""
     out = tmp_path / "rt"
     run = sitl(Mission(Sine(), duration_s=3.5, name="rtfs", params={"COM_DISARM_LAND": 0.5}), realtime=True, out=out,
                plots=False, instance=None, link={"blackouts": [[1.0, 2.2]]})

@@ -254,16 +254,18 @@ def direction_records(sent: Sequence[Frame], recv: Sequence[Frame], shift_recv_s
 
 
 def merge_directions(parts: Iterable[DirectionRecords]) -> DirectionRecords:
-    """The sources' records of one direction as one, in send-time order."""
+    """The sources' records of one direction as one, in send-time order; ``reordered`` the sum of each source's own
+    (a source's packets against each other), None if a source's is not counted (a part of a sum is not the count)."""
     out = DirectionRecords()
+    parts = list(parts)
     for p in parts:
         out.records += p.records
         out.duplicates += p.duplicates
         out.unmatched += p.unmatched
         out.outside += p.outside
         out.gaps_counted += p.gaps_counted
-        if p.reordered is not None:  # (each source's own order: a source's packets against each other)
-            out.reordered = (out.reordered or 0) + p.reordered
+    counted = [p.reordered for p in parts]
+    out.reordered = sum(counted) if counted and None not in counted else None  # type: ignore[arg-type]
     out.records.sort(key=lambda r: r[0])
     return out
 
