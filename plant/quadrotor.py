@@ -5,7 +5,8 @@ The ground is the plane z = 0 (paper frame, z up; missions start there at rest);
 
 In:  a profile and its effects, the physics rate (Hz), a start state (eq. 7: m, m/s, rad, rad/s), the wind
      (:class:`plant.wind.WindConfig`, or None: still air); then a normalised command (held) per control
-     period, and faults (a rotor's effectiveness 0..1)
+     period, faults (a rotor's effectiveness 0..1), and the disturbance's time 0 (plant time s,
+     :attr:`Quadrotor.disturbance_t0`: 0 unless a real-time flight has not started yet, None)
 Out: the state after each physics step, the realised wrench (N), the rotor speeds (rad/s), ground contact and
      a hard touchdown (impact speed m/s, tilt rad), the wind (m/s) and battery (V, A, mAh) statistics
 
@@ -92,6 +93,9 @@ class Quadrotor:
         self.state: State = tuple(float(v) for v in state)  # type: ignore[assignment]
         self._phases = e.disturbance.phases(seed)
         self._disturbed = e.disturbance.active
+        # plant time (s) of the disturbance's time 0: the flight's (0 offline); None: it does not act yet (a real-time
+        # vehicle's plant runs on the ground before its flight, whose time 0 is its first target: SimVehicle)
+        self.disturbance_t0: float | None = 0.0
         self._lagged = profile.actuation == "motors" and e.motor_lag
         hover = profile.hover_omega
         self.omega: tuple[float, float, float, float] = (hover,) * 4 if profile.actuation == "motors" else (0.0,) * 4
@@ -142,7 +146,8 @@ class Quadrotor:
     def derivative(self, t: float, X: State) -> State:
         """dX/dt at time t with the command held (eq. 6 plus the switched-on effects)."""
         u1, u2, u3, u4 = self.realised
-        ext = disturbance_at(self.effects.disturbance, self._phases, t) if self._disturbed else None
+        t0, d = self.disturbance_t0, self.effects.disturbance
+        ext = disturbance_at(d, self._phases, t - t0) if self._disturbed and t0 is not None else None
         return state_derivative(X, u1, u2, u3, u4, self._omega_d, self.body, ext)
 
     def step(self) -> None:
@@ -156,10 +161,10 @@ class Quadrotor:
         if self._lagged:
             self._set_omega(motor_lag_step(self.omega, self._omega_target, h, self.profile.motor_time_constant))
         ext = None
-        if self._disturbed:
-            d, ph = self.effects.disturbance, self._phases
-            mid = disturbance_at(d, ph, t + 0.5 * h)
-            ext = (disturbance_at(d, ph, t), mid, disturbance_at(d, ph, t + h))
+        if self._disturbed and self.disturbance_t0 is not None:  # on the flight's time (t - 0.0: t's bits offline)
+            d, ph, s = self.effects.disturbance, self._phases, t - self.disturbance_t0
+            mid = disturbance_at(d, ph, s + 0.5 * h)
+            ext = (disturbance_at(d, ph, s), mid, disturbance_at(d, ph, s + h))
         u1, u2, u3, u4 = self.realised
         if self.wind is None:
             X = self.rk4(self.state, u1, u2, u3, u4, self._omega_d, self.body.constants, h, ext)

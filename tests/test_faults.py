@@ -424,3 +424,31 @@ def test_a_battery_event_reads_the_pack_empty_and_is_checked_as_the_others(tmp_p
                         (3.004, "critical: 0.0 % left (BAT_CRIT_THR = 7 %)")], said
     assert (5.0, "battery ok") in said and run.summary["outcome"] == "completed"  # COM_LOW_BAT_ACT 0: warnings only
     assert 0.0 < run.summary["battery"]["used_mah"] < 0.5 * run.summary["battery"]["capacity_mah"]  # drawn as before
+
+
+def test_a_real_time_plant_run_before_its_flight_is_disturbed_on_the_flights_time() -> None:
+    """A real-time vehicle's plant runs on the ground from its start (SimVehicle.hold_timeline), and its flight's
+    time 0 is the state its first target answers: flown from there with the same targets, the flight is offline's,
+    its sine disturbance included. Until the forty-third session the disturbance ran on the plant's time: a loaded
+    run whose controller came 1.664 s after the vehicle (416 periods) flew the robust mission's disturbance turned
+    by half its 0.3 Hz period (the z force -0.19 N where offline's is +0.20 N), had slid 0.2 mm on the ground
+    before it, and stayed on the ground 0.16 s longer: RMS 0.290 m where offline flies 0.152
+    (test_hostile's flood reference)."""
+    mission = load_mission(ROOT / "missions" / "robust.toml").with_overrides(duration_s=1.0)
+    flight = prepare(mission)
+    offline, late = flight.make_vehicle(armed=True), flight.make_vehicle()
+    late.hold_timeline()
+    for _ in range(416):  # disarmed on the ground until the controller's arm and first target
+        late.advance()
+    late.arm()
+    k0 = 416
+    assert late.plant.state == offline.plant.state  # nothing acted on it before its flight
+    for k in range(100):  # 0.4 s of the same targets: above the weight, a roll torque, lift-off
+        c = (0.55 + 0.001 * k, -0.02, 0.0, 0.0)
+        assert offline.command(c) and late.command(c)
+        if k == 0:
+            late.start_mission_clock(k0 / mission.rate_hz)  # (Targets: a flight's first target)
+        offline.advance()
+        late.advance()
+    assert late.plant.state[4] > 0.01  # flown, off the ground
+    assert late.plant.state == pytest.approx(offline.plant.state, abs=1e-9)

@@ -163,8 +163,11 @@ class SimVehicle:
 
     def hold_timeline(self) -> None:
         """Real time: the vehicle's plant runs before the flight, whose time 0 is not known yet; the timeline
-        waits for :meth:`start_mission_clock`."""
+        waits for :meth:`start_mission_clock`, and so does the plant's disturbance (it acts on the flight's time, as
+        offline: counted from the vehicle's start, a controller that came 1.66 s late flew its phase turned by half a
+        period, and a vehicle held on the ground by a downward push it never had offline)."""
         self._mission_t0 = None
+        self.plant.disturbance_t0 = None
 
     def start_mission_clock(self, t0: float) -> None:
         """The mission's time 0 is plant time ``t0`` (s; real time: the state the flight's first target answers):
@@ -172,6 +175,7 @@ class SimVehicle:
         if self._mission_t0 is not None:
             return
         self._mission_t0 = t0
+        self.plant.disturbance_t0 = t0
         wind = self.plant.wind
         if wind is not None:
             wind.gusts = [replace(g, t_s=g.t_s + t0) for g in wind.gusts]
