@@ -439,8 +439,9 @@ def trace_blackouts(trace: dict[str, Any], rate_hz: float) -> list[list[float]]:
             continue
         if out and abs(out[-1][0] + out[-1][1] - (j - 0.5) * period) < 1e-9:
             out[-1][1] += period
-        else:
-            out.append([(j - 0.5) * period, period])
+        else:  # (the first tick's from the flight's start: a blackout starts at 0 s or later)
+            start = max((j - 0.5) * period, 0.0)
+            out.append([start, (j + 0.5) * period - start])
     return [[round(a, 6), round(d, 6)] for a, d in out]
 
 

@@ -215,6 +215,16 @@ def test_fuzz_during_a_lockstep_mission(undisturbed, tmp_path):
     assert any(t.startswith("rejected ") for t in f.texts), f.texts[:5]
 
 
+def test_an_outage_of_the_first_tick_is_a_blackout_from_the_flights_start() -> None:
+    """The flood test's model of a disturbed run (tests/sitlkit.trace_blackouts): a first tick no command answered
+    (a vehicle stalled at its start: its trace's first row at 8 ms) is a blackout from 0 s, not from -2 ms, which the
+    mission's [link] refuses (a loaded suite's flood test failed so, its flights both fine)."""
+    trace = {"t": [0.008, 0.012, 0.016], "state_age_s": [0.004, 0.008, 0.008]}
+    assert trace_blackouts(trace, 250.0) == [[0.0, 0.002]]
+    trace = {"t": [0.004, 0.008, 0.016, 0.020], "state_age_s": [0.004, 0.004, 0.008, 0.004]}
+    assert trace_blackouts(trace, 250.0) == [[0.01, 0.004]]  # tick 3's state, lost: from half a period before it
+
+
 def test_a_flood_from_another_source_is_shed_and_the_flight_holds(tmp_path):
     """Real time, another source at 20x the controller's rate (5000 datagrams/s) during the
     whole flight: the flight completes with its RMS within 10 % of an undisturbed run's, the
