@@ -329,12 +329,12 @@ def check_state_changes(timeline: Sequence[TimedEvent], rate_hz: float, source: 
                                 f"{_device_name(device)} at the control step at {e.step(rate_hz) / rate_hz:g} s "
                                 f"({rate_hz:g} Hz), so which one holds is ambiguous: give one, or times a step "
                                 f"({1.0 / rate_hz:g} s) apart", table_where(source, e))
-        was = None if device[0] not in _SWITCHES else \
-            _DEVICE_START[device[0]] if before is None else device_set(before)[1]  # type: ignore[index]
-        if was is not None and state == was:
-            since = "as every flight starts" if before is None else f"since {before.text()} at {before.t_s:g} s"
-            raise EventError(e, f"{_already(device, state)} at {e.t_s:g} s ({since}): the event would change "
-                                "nothing", table_where(source, e))
+        if device[0] in _SWITCHES:  # (a switch only: a level, the wind, the link may be set again as it is)
+            was = _DEVICE_START[device[0]] if before is None else device_set(before)[1]  # type: ignore[index]
+            if state == was:
+                since = "as every flight starts" if before is None else f"since {before.text()} at {before.t_s:g} s"
+                raise EventError(e, f"{_already(device, state)} at {e.t_s:g} s ({since}): the event would change "
+                                    "nothing", table_where(source, e))
         last[device] = e
 
 

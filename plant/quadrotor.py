@@ -146,8 +146,9 @@ class Quadrotor:
     def derivative(self, t: float, X: State) -> State:
         """dX/dt at time t with the command held (eq. 6 plus the switched-on effects)."""
         u1, u2, u3, u4 = self.realised
-        t0, d = self.disturbance_t0, self.effects.disturbance
-        ext = disturbance_at(d, self._phases, t - t0) if self._disturbed and t0 is not None else None
+        ext = None
+        if self._disturbed and self.disturbance_t0 is not None:  # on the flight's time (:meth:`step`)
+            ext = disturbance_at(self.effects.disturbance, self._phases, t - self.disturbance_t0)
         return state_derivative(X, u1, u2, u3, u4, self._omega_d, self.body, ext)
 
     def step(self) -> None:

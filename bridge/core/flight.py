@@ -424,12 +424,13 @@ def noiseless(sensors: SensorConfig) -> bool:
     return not any(getattr(sensors, k) for k in SIGMA_KEYS)
 
 
-def unread_problem(estimators: Sequence[str], what: str) -> str | None:
+def unread_problem(estimators: Sequence[str], what: str, choose: str = "--estimator raw or ekf") -> str | None:
     """Why ``what`` of the sensors (their noise, the set flown) would change nothing in flights with these estimator
-    kinds (None if it would): every one is ``truth`` (the true state: the sensors are not read)."""
+    kinds (None if it would): every one is ``truth`` (the true state: the sensors are not read); ``choose``: how the
+    caller picks another (the flag; a Python caller's keyword)."""
     if set(estimators) <= {"truth"}:
         return (f"the estimator is 'truth' (the true state: the sensors are not read), so {what} changes nothing; "
-                "give --estimator raw or ekf (or [estimator] kind)")
+                f"give {choose} (or [estimator] kind)")
     return None
 
 
@@ -437,12 +438,14 @@ def laid_sensing_refusal(over: Overrides, flight: Flight) -> str | None:
     """The line refusing a Python caller's ``noise=`` or ``sensors=`` that the flight does not read (its estimator
     ``truth``), as ``--noise`` / ``--sensors`` are refused (bridge.cli.options): ``simulate(m, noise=5.0)`` flew the
     true state, byte for byte as without it, until the third wave's forty-third session; None."""
-    given = [f"noise = {over.noise:g}"] if over.noise is not None else []
-    given += [f"sensors = {dict(over.sensors)!r}"] if over.sensors and "set" in over.sensors else []
-    why = unread_problem((flight.estimator,), "noise" if over.noise is not None else "the sensor set")
-    if not (given and why):
+    if over.noise is not None:
+        given, what = f"noise = {over.noise:g}", "noise"
+    elif over.sensors and "set" in over.sensors:
+        given, what = f"sensors = {dict(over.sensors)!r}", "the sensor set"
+    else:
         return None
-    return f"{given[0]}: " + why.replace("--estimator raw or ekf", "estimator='raw' or 'ekf'")
+    why = unread_problem((flight.estimator,), what, choose="estimator='raw' or 'ekf'")
+    return f"{given}: {why}" if why else None
 
 
 def noise_problem(estimators: Sequence[str], sensors: SensorConfig) -> str | None:
