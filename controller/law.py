@@ -128,8 +128,7 @@ class LawError(ConfigError):
     def __init__(self, spec: str, what: str, where: str | None = None) -> None:
         self.where = where or f"controller {spec!r}"
         self.spec = spec
-        self.what = what
-        super().__init__(f"{self.where}: {what}")
+        super().__init__(f"{self.where}: {what}", what=what)
 
 
 def is_builtin(spec: str) -> bool:

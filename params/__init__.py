@@ -11,9 +11,7 @@ import functools
 import json
 import math
 import os
-import re
 import stat
-import sys
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
@@ -21,14 +19,32 @@ from contextvars import ContextVar
 from pathlib import Path
 from typing import Any, ParamSpec, TypeVar
 
-from params.text import is_typo_of, likely, unknown_key_hint  # noqa: F401  (a misspelt key's: params' own names)
+from params.text import is_typo_of, likely, too_many_digits, unknown_key_hint  # noqa: F401  (params' own names)
 
 _P = ParamSpec("_P")
 _R = TypeVar("_R")
 
 
 class ConfigError(ValueError):
-    """A parameter file or value is wrong; the message names the file and the key."""
+    """A parameter file or value is wrong; the message names the file and the key.
+
+    Its typed fields, set by the code that raises (None where it did not), are how a caller re-names or re-anchors a
+    refusal: by reading them, never by matching the message's text (``str()`` is the message, unchanged). ``source``:
+    what the message opens with, as given (a file's path, a flag, a command: ``bsst link extract``; None: it opens
+    with the reason, ``unknown link profile 'x'``); ``key``: the dotted key in it (``link.up.trace``); ``what``: the
+    bare reason after them."""
+
+    def __init__(self, message: str = "", *, source: str | None = None, key: str | None = None,
+                 what: str | None = None) -> None:
+        super().__init__(message)
+        self.source, self.key, self.what = source, key, what
+
+    @classmethod
+    def at(cls, source: str, key: str | None, what: str) -> ConfigError:
+        """``source: key: what`` (``source: what`` without a key), with its fields; each shown escaped in the message
+        if it holds a newline or another unprintable character (every message is one line)."""
+        where = f"{_printable(key, KEY_SHOWN_MAX)}: " if key else ""
+        return cls(f"{_printable(source)}: {where}{what}", source=source, key=key, what=what)
 
 
 MAX_TOML_BYTES = 4 << 20  # a mission, profile or sweep file is a few kB; anything this big is not one
@@ -114,32 +130,32 @@ def read_regular_file(path: str | Path, expected: str = "file", max_bytes: int |
     The path is recorded as an input (:func:`note_input`)."""
     p = Path(path)
     note_input(p)
-    name = _printable(str(p))  # (a path with a newline in it stays on the message's one line)
+    src = str(p)  # (a path with a newline in it stays on the message's one line: ConfigError.at)
     try:
         kind = _file_kind(os.stat(p).st_mode)
     except FileNotFoundError:
-        raise ConfigError(f"{name}: no such file") from None
+        raise ConfigError.at(src, None, "no such file") from None
     except OSError as exc:
-        raise ConfigError(f"{name}: cannot read ({exc.strerror})") from None
+        raise ConfigError.at(src, None, f"cannot read ({exc.strerror})") from None
     if kind:
-        raise ConfigError(f"{name}: is {kind}, expected {expected}")
+        raise ConfigError.at(src, None, f"is {kind}, expected {expected}")
     try:
         fd = os.open(p, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
     except OSError as exc:
-        raise ConfigError(f"{name}: cannot read ({exc.strerror})") from None
+        raise ConfigError.at(src, None, f"cannot read ({exc.strerror})") from None
     try:
         st = os.fstat(fd)
         kind = _file_kind(st.st_mode)
         if kind:
-            raise ConfigError(f"{name}: is {kind}, expected {expected}")
+            raise ConfigError.at(src, None, f"is {kind}, expected {expected}")
         if max_bytes is not None and st.st_size > max_bytes:
-            raise ConfigError(f"{name}: {st.st_size} bytes, larger than {max_bytes} bytes: not {expected}")
+            raise ConfigError.at(src, None, f"{st.st_size} bytes, larger than {max_bytes} bytes: not {expected}")
         chunks = []
         while chunk := os.read(fd, 1 << 20):
             chunks.append(chunk)
         return b"".join(chunks)
     except OSError as exc:
-        raise ConfigError(f"{name}: cannot read ({exc.strerror})") from None
+        raise ConfigError.at(src, None, f"cannot read ({exc.strerror})") from None
     finally:
         os.close(fd)
 
@@ -175,7 +191,7 @@ def read_text_file(path: str | Path, expected: str, max_bytes: int = MAX_TOML_BY
     try:
         return utf8_text(raw)
     except UnicodeDecodeError:
-        raise ConfigError(f"{_printable(str(Path(path)))}: not a text file (expected {expected})") from None
+        raise ConfigError.at(str(Path(path)), None, f"not a text file (expected {expected})") from None
 
 
 def load_toml(path: str | Path) -> dict[str, Any]:
@@ -188,35 +204,23 @@ def load_toml(path: str | Path) -> dict[str, Any]:
 
 def toml_from_bytes(raw: bytes, p: Path) -> dict[str, Any]:
     """The table in ``raw``, the bytes of the TOML file ``p`` (:func:`load_toml`'s errors, naming ``p``)."""
-    name = _printable(str(p))
+    src = str(p)
     try:
         data = tomllib.loads(utf8_text(raw))
     except UnicodeDecodeError:
-        raise ConfigError(f"{name}: not a text file (expected TOML)") from None
+        raise ConfigError.at(src, None, "not a text file (expected TOML)") from None
     except tomllib.TOMLDecodeError as exc:
         text = utf8_text(raw).lstrip()  # (a ground station's file is read by its name's suffix: say so)
         hint = ("; it reads as a QGroundControl plan: name it .plan" if text.startswith("{") and '"fileType"' in text
                 else "; it reads as a QGC WPL waypoint file: name it .waypoints" if text.startswith("QGC WPL") else "")
-        raise ConfigError(f"{name}: not valid TOML ({exc}){hint}") from None
+        raise ConfigError.at(src, None, f"not valid TOML ({exc}){hint}") from None
     except ValueError as exc:  # an integer over Python's limit of digits (tomllib converts with int())
-        raise ConfigError(f"{name}: not valid TOML ({too_many_digits(utf8_text(raw), exc)})") from None
+        raise ConfigError.at(src, None, f"not valid TOML ({too_many_digits(utf8_text(raw), exc)})") from None
     except RecursionError:
-        raise ConfigError(f"{name}: nested too deeply (more than {MAX_DEPTH} levels of tables and lists)") from None
+        raise ConfigError.at(src, None, f"nested too deeply (more than {MAX_DEPTH} levels of tables and lists)") \
+            from None
     check_depth(data, str(p))
     return data
-
-
-def too_many_digits(text: str, exc: ValueError) -> str:
-    """What is wrong when a parser's ``int()`` refused an integer of ``text`` over Python's limit of digits
-    (``sys.get_int_max_str_digits``; ``ValueError: Exceeds the limit ...``): where the longest run of digits
-    is and how long it is, in words (any other ``exc``: its text, shortened)."""
-    limit = sys.get_int_max_str_digits()
-    runs = [m for m in re.finditer(r"[0-9][0-9_]*", text) if len(m.group()) > limit]
-    if not runs or "limit" not in str(exc):
-        return str(exc)[:200]
-    m = max(runs, key=lambda r: len(r.group()))
-    line = text.count("\n", 0, m.start()) + 1
-    return f"line {line}: an integer of {len(m.group().replace('_', ''))} digits, over the {limit} Python reads"
 
 
 def finite_float(v: Any) -> float | None:
@@ -246,7 +250,8 @@ def check_depth(data: Any, source: str, limit: int = MAX_DEPTH) -> None:
             continue
         if depth >= limit:
             where = f"{_printable(top[:40])}: " if top else ""
-            raise ConfigError(f"{_printable(source)}: {where}nested more than {limit} levels deep")
+            raise ConfigError(f"{_printable(source)}: {where}nested more than {limit} levels deep", source=source,
+                              key=top or None, what=f"nested more than {limit} levels deep")
         stack.extend((v, depth + 1, name) for name, v in children)
 
 
@@ -261,7 +266,8 @@ class Table:
 
     def __init__(self, data: Mapping[str, Any], source: str, prefix: str = "") -> None:
         if not isinstance(data, Mapping):
-            raise ConfigError(f"{source}: {prefix or 'top level'}: expected a table")
+            raise ConfigError(f"{source}: {prefix or 'top level'}: expected a table", source=source, key=prefix or None,
+                              what="expected a table")
         self._data = data
         self._source = source
         self._prefix = prefix
@@ -273,7 +279,7 @@ class Table:
     def error(self, name: str, why: str) -> ConfigError:
         """The error of key ``name`` (it and the source shown escaped if either holds a newline or another
         unprintable character: every message is one line)."""
-        return ConfigError(f"{_printable(self._source)}: {_printable(self.key(name), KEY_SHOWN_MAX)}: {why}")
+        return ConfigError.at(self._source, self.key(name), why)
 
     def has(self, name: str) -> bool:
         """Whether the table holds key ``name``; if not, a key it knows all the same (a misspelling suggests it)."""

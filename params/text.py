@@ -9,14 +9,17 @@ Out: the text on one line: every run of whitespace (line breaks, tabs) one space
      likely misspells (:func:`likely`, :func:`is_typo_of`), or None; what an unknown key's refusal adds
      (:func:`unknown_key_hint`: the key meant, where a PX4 parameter goes, else the keys allowed; :func:`meant_hint`,
      the first two alone: a vehicle parameter's name); a name a user gave, quoted and shortened (:func:`quoted`,
-     :func:`shown_name`)
+     :func:`shown_name`); where an integer over Python's limit of digits is (:func:`too_many_digits`)
 
-(Apart from ``params/__init__.py``, which re-exports the misspelling's two, and was at its 500 lines.)
+(Apart from ``params/__init__.py``, which re-exports the misspelling's two and the digits' one, and was at its 500
+lines.)
 """
 
 from __future__ import annotations
 
 import difflib
+import re
+import sys
 from collections.abc import Iterable
 
 from params.px4 import px4_hint
@@ -141,3 +144,16 @@ def unknown_key_hint(text: str, known: Iterable[str]) -> str:
         return f"; allowed: {', '.join(words)}"
     close = difflib.get_close_matches(text, words, n=6, cutoff=0.4) or words[:6]  # (none close: the first ones)
     return f"; allowed: {', '.join(close)}, ... ({len(words)} keys)"
+
+
+def too_many_digits(text: str, exc: ValueError) -> str:
+    """What is wrong when a parser's ``int()`` refused an integer of ``text`` over Python's limit of digits
+    (``sys.get_int_max_str_digits``; ``ValueError: Exceeds the limit ...``): where the longest run of digits
+    is and how long it is, in words (any other ``exc``: its text, shortened)."""
+    limit = sys.get_int_max_str_digits()
+    runs = [m for m in re.finditer(r"[0-9][0-9_]*", text) if len(m.group()) > limit]
+    if not runs or "limit" not in str(exc):
+        return str(exc)[:200]
+    m = max(runs, key=lambda r: len(r.group()))
+    line = text.count("\n", 0, m.start()) + 1
+    return f"line {line}: an integer of {len(m.group().replace('_', ''))} digits, over the {limit} Python reads"

@@ -129,9 +129,8 @@ class EventError(ConfigError):
 
     def __init__(self, event: TimedEvent, what: str, where: str) -> None:
         self.event = event
-        self.what = what
         self.where = where
-        super().__init__(f"{where}: {what}")
+        super().__init__(f"{where}: {what}", what=what)
 
 
 def ranged_number(t: Table, key: str, default: Any = ...) -> float:
