@@ -284,6 +284,32 @@ def test_a_flags_trace_that_does_not_fit_the_flight_is_named_as_the_flag(tmp_pat
         simulate(sine, link={"trace": str(f)})
 
 
+def test_a_trace_the_up_and_down_flags_give_is_named_as_the_flags_typed(tmp_path: Path, capsys) -> None:
+    """``--up-link-trace F --down-link-trace F`` of a trace too short for the mission was refused as ``--link-trace F
+    lasts 2 s ...``, a flag the user did not type, until the third wave's forty-third session (and a file bad alone
+    so): the override table writes ``--link-trace F`` as both directions' traces, and the refusal guessed the flag
+    from the table (both the same: ``--link-trace``) and matched the refusal's text. Now the flags are kept as typed
+    (``Overrides.link_flags``) and the refusal is read by its fields: the direction refused is named by the flag that
+    gave its trace; a file bad alone by every flag that gave it. A Python caller's ``link=`` by its own keys' flags."""
+    f = write_trace(tmp_path / "t.csv", {None: made(LinkConfig(delay_ms=5.0), seconds=2.0)})
+    bad = tmp_path / "bad.csv"
+    bad.write_text("name = 1\n")
+    sine = str(ROOT / "missions" / "sine.toml")
+    short = "lasts 2 s (500 up records), shorter than the mission (30 s)"
+    for argv, said in (
+            (["--up-link-trace", f, "--down-link-trace", f], f"bsst: --up-link-trace {f} {short}"),
+            (["--link-trace", f, "--up-link-trace", f], f"bsst: --up-link-trace {f} {short}"),
+            (["--link-trace", f, "--down-link-trace", f], f"bsst: --link-trace {f} {short}"),
+            (["--up-link-trace", bad, "--down-link-trace", bad],
+             f"bsst: --up-link-trace / --down-link-trace {bad} line 1: unknown column 'name = 1'")):
+        assert main(["sim", sine, *map(str, argv), "--out", str(tmp_path / "run")]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(said) and "laid over" not in err[0], err
+    with pytest.raises(ConfigError, match=rf"^--up-link-trace {re.escape(str(f))} lasts 2 s"):
+        simulate(sine, link={"up": {"trace": str(f)}, "down": {"trace": str(f)}})
+    assert not (tmp_path / "run").exists()
+
+
 def test_a_flags_profile_with_a_bad_key_names_its_file_and_key_alone(tmp_path: Path, capsys) -> None:
     """``--link-profile p.toml`` whose ``[link]`` has a mistyped key is named by the profile's file and key, without
     the "(with these laid over the mission's [link]: link.profile = ...)" that followed it until the third wave's

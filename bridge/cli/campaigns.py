@@ -33,6 +33,7 @@ from bridge.cli.linkflags import (
     add_link_options,
     guard_flag_refusal,
     idle_link_flag,
+    link_flags_from_args,
     link_table_from_args,
 )
 from bridge.cli.options import (
@@ -172,7 +173,8 @@ def _sweep(args: argparse.Namespace) -> int:
     # [link] or [wind] that would change nothing (a swept --loss gives a burst_len its loss, a swept --turbulence a
     # turbulence_scaling its turbulence: every axis given, as each cell lays it)
     if laid or idle_link_key(spec.mission, fixed, swept):
-        flight = prepare(spec.mission, Overrides(link=fixed or None, sensors=sensors, scatter_m=args.scatter),
+        flight = prepare(spec.mission, Overrides(link=fixed or None, link_flags=link_flags_from_args(args) or None,
+                                                 sensors=sensors, scatter_m=args.scatter),
                          axes=spec.grid.swept(), laid_named=True)
         idle = idle_link_flag(args, [flight.link], swept, cells=True)  # (None: no such flag given)
         if idle:
@@ -339,7 +341,8 @@ def _margin(args: argparse.Namespace) -> int:
     probe = {args.over: [START[args.over]]} if args.over in LINK_AXES else None
     m = checked_mission(args, args.mission, None, args.controller or (), probe)  # (a discretization: every law's)
     mission = prepare(m.with_overrides(discretization=args.discretization), Overrides(
-        link=fixed or None, turbulence=args.turbulence, scatter_m=args.scatter, **sensing), axes=probe or ()).mission
+        link=fixed or None, link_flags=link_flags_from_args(args) or None, turbulence=args.turbulence,
+        scatter_m=args.scatter, **sensing), axes=probe or ()).mission
     run_dir(args.out, f"{mission.name}-margin", args.overwrite, create=False)  # a refused --out before any flight
     from bridge.record.outlock import out_held  # lazy: start-up time
 

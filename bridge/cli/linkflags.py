@@ -4,7 +4,8 @@ traces, profiles, the controller's guards), and the ``[link]`` override table re
 In:  the parsed flags (link values in ms, %, packets, bytes/s; ``--blackout START:DURATION`` s; trace and profile
      files)
 Out: :func:`link_table_from_args`'s ``[link]`` override table, which goes to :func:`bridge.core.flight.prepare` in
-     an :class:`~bridge.core.overrides.Overrides` like every other override
+     an :class:`~bridge.core.overrides.Overrides` like every other override, with the flags that gave its traces as
+     typed (:func:`link_flags_from_args`)
      (:func:`bridge.cli.options.overrides_from_args`); a combination no direction can fly is a ``UsageError``
      naming the flags (exit 2); :func:`idle_link_flag`, a flag that would change nothing, as its refusal's line;
      :func:`guard_flag_refusal`, a guard flag that clashes with the flight's other guard keys, as its line
@@ -157,6 +158,20 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
         v = getattr(args, f"link_{key}", None)
         if v is not None:
             out[key] = v
+    return out
+
+
+def link_flags_from_args(args: argparse.Namespace) -> dict[str, str]:
+    """The flag that gave each trace and the profile of :func:`link_table_from_args`'s table, as typed, by its place
+    there (``{"up.trace": "--link-trace", "down.trace": "--down-link-trace", "profile": "--link-profile"}``): the
+    table writes ``--link-trace F`` as ``--up-link-trace F --down-link-trace F``, and a refusal of that trace names
+    the flag the user gave (:attr:`bridge.core.overrides.Overrides.link_flags`); {} if none."""
+    out = {"profile": "--link-profile"} if getattr(args, "link_profile", None) is not None else {}
+    for d in ("up", "down"):
+        given = [f for dest, f in ((f"link_{d}_trace", f"--{d}-link-trace"), ("link_trace", "--link-trace"))
+                 if getattr(args, dest, None) is not None]
+        if given:  # (the direction's own flag wins, as in the table)
+            out[f"{d}.trace"] = given[0]
     return out
 
 

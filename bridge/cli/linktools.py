@@ -207,7 +207,7 @@ def add_relay_command(sub: Any) -> None:
 
 def cmd_relay(args: argparse.Namespace) -> int:
     """``bsst relay``: relay until SIGINT/SIGTERM or ``--duration``; print (and ``--stats``) the figures."""
-    from bridge.core.flight import at_rest, prepare  # lazy: start-up time
+    from bridge.core.flight import Span, at_rest, prepare  # lazy: start-up time
     from bridge.link.model import jitter_capped_text  # lazy: start-up time
     from bridge.nodes.relay import Relay, client_event, forwards_to_itself, parse_address  # lazy: start-up time
     from bridge.nodes.report import to_line  # lazy: start-up time
@@ -225,18 +225,14 @@ def cmd_relay(args: argparse.Namespace) -> int:
     mission = checked_mission(args, args.mission or None)  # read once; a link flag that would change nothing: as
     # bsst sim refuses it. The one path from a mission and its overrides to the parts: the whole mission is checked
     # (a key of its [link] that would change nothing too), and the relay flies the link it gives
-    try:  # without a mission the relay's run is its flight: --duration, else a day (a trace must last it, a
-        # blackout start in it: until the forty-third session a 200 s trace with --duration 30 was refused as
-        # shorter than "the mission (86400 s)", and a blackout after --duration relayed, exit 0, never happening)
-        settings = prepare(mission if mission is not None else at_rest(args.duration or 86400.0),
-                           overrides_from_args(args)).link
-    except ConfigError as exc:
-        if mission is not None:
-            raise
-        run = ("run without --duration" if not args.duration else "--duration" if args.duration <= 86400.0
-               else "run (a day at most)")
-        raise ConfigError(str(exc).replace("the mission (", f"the relay's {run} (")
-                          .replace("the mission's end (duration_s = ", f"the relay's end ({run} ")) from None
+    # without a mission the relay's run is its flight: --duration, else a day (a trace must last it, a blackout start
+    # in it: until the forty-third session a 200 s trace with --duration 30 was refused as shorter than "the mission
+    # (86400 s)", and a blackout after --duration relayed, exit 0, never happening), and its refusals say so
+    run = ("run without --duration" if not args.duration else "--duration" if args.duration <= 86400.0
+           else "run (a day at most)")
+    span = Span() if mission is not None else Span(f"the relay's {run}", "the relay's end", run)
+    settings = prepare(mission if mission is not None else at_rest(args.duration or 86400.0),
+                       overrides_from_args(args), span=span).link
     if args.stats is not None:  # bad input now, not a failure after relaying; and never a file it reads (its
         # mission, trace, profile: params.inputs_read; the fleet's radio it writes in place)
         read = [*inputs_read().values(), *([args.radio] if args.radio else [])]

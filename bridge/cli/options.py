@@ -33,7 +33,13 @@ from bridge.cli.flags import (
     path_given,
     sensor_set_name,
 )
-from bridge.cli.linkflags import guard_flag_refusal, idle_flags_given, idle_link_flag, link_table_from_args
+from bridge.cli.linkflags import (
+    guard_flag_refusal,
+    idle_flags_given,
+    idle_link_flag,
+    link_flags_from_args,
+    link_table_from_args,
+)
 from params import ConfigError, load_toml
 from params.text import number
 
@@ -339,7 +345,7 @@ def overrides_from_args(args: argparse.Namespace) -> Overrides:
     return Overrides(profile=getattr(args, "profile", None), controller=getattr(args, "controller", None),
                      discretization=getattr(args, "discretization", None), rate_hz=getattr(args, "rate", None),
                      seed=getattr(args, "seed", None), scatter_m=getattr(args, "scatter", None),
-                     link=link_table_from_args(args) or None,
+                     link=link_table_from_args(args) or None, link_flags=link_flags_from_args(args) or None,
                      failsafe=failsafe_table_from_args(args) or None, **sensor_overrides_from_args(args),
                      **param_overrides_from_args(args),
                      wind=getattr(args, "wind", None), turbulence=getattr(args, "turbulence", None),

@@ -34,7 +34,7 @@ from bridge.autopilot.params import (
     params_from_table,
 )
 from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
-from bridge.core.overrides import Overrides, table_settings
+from bridge.core.overrides import Overrides, laid_file_problem, laid_trace_misfit, table_settings
 from bridge.core.scalar import checked_choice, compile_for, compiled_needed, compiled_wanted, wire_for
 from bridge.core.weather import handovers_of, weather_of
 from bridge.link.model import (
@@ -47,7 +47,6 @@ from bridge.link.model import (
     unmet_key,
 )
 from bridge.link.profile import load_link_profile
-from bridge.link.trace import read_trace
 from controller import Controller, Gains, Nominal, gains_from_table
 from controller.law import LawError, LawFactory, discretization_problem, resolve_law
 from controller.link_guard import GuardConfig
@@ -188,8 +187,18 @@ FLEETS_ELSEWHERE = ("a sweep lays fleets out itself (--vehicles N,... on a missi
                     "margin, vehicle and controller fly one vehicle")
 
 
+@dataclass(frozen=True)
+class Span:
+    """What a flight's ``duration_s`` is the length of, in its refusals' words (:func:`prepare`'s ``span``): a
+    mission's, or ``bsst relay``'s run without one (bridge.cli.linktools)."""
+
+    whole: str = "the mission"  # a link trace "shorter than the mission (30 s)"
+    end: str = "the mission's end"  # a blackout "after the mission's end (duration_s = 30 s)"
+    given: str = "duration_s ="  # how that length was given, before it
+
+
 def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *, axes: Iterable[str] = (),
-            laid_named: bool = False, **keywords: Any) -> Flight:
+            laid_named: bool = False, span: Span = Span(), **keywords: Any) -> Flight:
     """Validate a mission (object or file) with its :class:`Overrides` into a :class:`Flight`.
 
     The overrides are ``overrides``, or the same fields as keywords (:meth:`Overrides.of`: ``rate_hz=500``).
@@ -205,7 +214,7 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     then one ``link`` lays over it (unless ``laid_named``: the caller names what it lays over itself, a command
     its flags, bridge.cli.linkflags.idle_link_flag, a campaign its cells' axes, bridge.sweep.spec), a
     ``discretization`` override for a law without a super-twisting step (:func:`discretization_refusal`), a
-    turbulence scaling with no turbulence (:func:`scaling_refusal`).
+    turbulence scaling with no turbulence (:func:`scaling_refusal`). ``span``: what the mission's length is called.
     """
     over = Overrides.of(overrides, **keywords)
     axes = tuple(axes)  # (read by each refusal below)
@@ -227,9 +236,9 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     vehicle_params = params_from_table(m.params, src, VehicleParams(failsafe_from_table(m.failsafe, src)))
     failsafe = vehicle_params.failsafe
     changes = check_param_changes(over.param_at, m.duration_s)
-    link_settings = _link_of(m, over)
+    link_settings = _link_of(m, over, span)
     sensor_config, estimator_kind = _sensing_of(m, over, prof)
-    _check_blackouts(m, over, link_settings)
+    _check_blackouts(m, over, link_settings, span)
     # an event's refusal is named where it was given (plant.events.table_where): a flag's by its TimedEvent.at
     # (--at 10:gps:off), else the mission's table, with a table laid from Python's place in at= (at[0])
     wind, timeline = weather_of(m, prof, sensor_config, estimator_kind, effects.battery)
@@ -279,59 +288,25 @@ def _profile_of(m: Mission, over: Overrides) -> Profile:
     return prof.with_actuation(m.actuation) if m.actuation else prof
 
 
-def _link_of(m: Mission, over: Overrides) -> LinkSettings:
+def _link_of(m: Mission, over: Overrides, span: Span) -> LinkSettings:
     """The mission's link settings (:func:`bridge.link.model.link_from_table`, the overrides laid over already); a
     table refused with overrides over a file's says what was laid over it."""
     src = m.source
     try:
-        return link_from_table(m.link, src, seed=m.seed, duration_s=m.duration_s)
+        return link_from_table(m.link, src, seed=m.seed, duration_s=m.duration_s, span=span.whole)
     except ConfigError as exc:
         if not over.link or not Path(src).is_file():  # no file (bsst relay or vehicle without one, --await-mission,
             raise  # a Mission made in Python): no file's [link] to tell the overrides from
-        flagged = laid_file_problem(over.link) or _laid_trace_misfit(str(exc), src, over.link)  # a trace or
-        # profile the flags gave, bad alone or not fitting this flight: the flag's
+        flagged = laid_file_problem(over.link, over.link_flags) or laid_trace_misfit(exc, src, m.link, over)  # a
+        # trace or profile the flags gave, bad alone or not fitting this flight: the flag's
         if flagged:
             raise ConfigError(flagged) from None
-        if not str(exc).startswith(f"{src}: "):  # another file's key (the profile's own link.delay): what was laid
-            raise  # over the mission's [link] is not in it
+        if exc.source != src:  # another file's key (the profile's own link.delay): what was laid over the mission's
+            raise  # [link] is not in it
         # the file's [link] with the overrides over it: say them, or a user who gave --stop-after 40 reads that the
         # file has a stop_ms it does not have
         laid = table_settings(over.link, "link")
         raise ConfigError(f"{exc} (with these laid over the mission's [link]: {laid})") from None
-
-
-def laid_file_problem(link: Mapping[str, Any]) -> str | None:
-    """The line refusing a trace or profile file that ``link`` (the flags', or a caller's ``link=``) lays over a
-    mission's ``[link]`` and that is bad on its own, named as the flag that gives it (``--link-trace``, both
-    directions; ``--up-link-trace``; ``--link-profile``), not as the mission's key; None. Read again only once the
-    table was refused (a trace may be millions of records)."""
-    link = absolute_link_paths(link, Path("."))
-    sides = {d: t.get("trace") for d in DIRECTIONS if isinstance(t := link.get(d), Mapping)}
-    both = link.get("trace") or (sides.get("up") if sides.get("up") == sides.get("down") else None)
-    files = [("--link-profile", link.get("profile"), load_link_profile), ("--link-trace", both, read_trace)]
-    files += [(f"--{d}-link-trace", sides.get(d), read_trace) for d in DIRECTIONS if not both]
-    for flag, path, read in files:
-        if isinstance(path, str) and path:
-            try:
-                read(path)
-            except ConfigError as exc:  # (a file's line opens with its path; a profile's unknown name does not)
-                return f"{flag} {exc}" if str(exc).startswith(path) else f"{flag}: {exc}"
-    return None
-
-
-def _laid_trace_misfit(line: str, src: str, link: Mapping[str, Any]) -> str | None:
-    """``line`` (a refusal of ``link.D.trace``: no rows of D, one, or shorter than the mission) named as the
-    flag that laid that trace over the mission (``--link-trace``, ``--up-link-trace``), not as the mission's key it
-    does not hold; None if the flags did not give it (``--link-trace t.csv`` read ``sine.toml: link.up.trace: ...``)."""
-    link = absolute_link_paths(link, Path("."))
-    sides = {d: t.get("trace") for d in DIRECTIONS if isinstance(t := link.get(d), Mapping)}
-    both = link.get("trace") or (sides.get("up") if sides.get("up") == sides.get("down") else None)
-    for d in DIRECTIONS:
-        path = both or sides.get(d)
-        head = f"{src}: link.{d}.trace: "
-        if isinstance(path, str) and path and line.startswith(f"{head}{path} "):
-            return f"{'--link-trace' if both else f'--{d}-link-trace'} {line[len(head):]}"
-    return None
 
 
 def _sensing_of(m: Mission, over: Overrides, prof: Profile) -> tuple[SensorConfig, str]:
@@ -349,15 +324,14 @@ def _sensing_of(m: Mission, over: Overrides, prof: Profile) -> tuple[SensorConfi
     return sensor_config, estimator_kind
 
 
-def _check_blackouts(m: Mission, over: Overrides, link_settings: LinkSettings) -> None:
+def _check_blackouts(m: Mission, over: Overrides, link_settings: LinkSettings, span: Span) -> None:
     """Refuse a link blackout that starts after the mission's end: one that would never happen is a mistake in the
     file, not a plan (named where it was given: :func:`_blackouts_given`)."""
     for d in ("up", "down"):
         for start, dur in getattr(link_settings, d).blackouts:
             if start >= m.duration_s:
                 raise ConfigError(f"{_blackouts_given(m, over, d)}: the window [{start:g}, {start + dur:g}) s starts "
-                                  f"after the mission's end (duration_s = {m.duration_s:g} s), so it would never "
-                                  "happen")
+                                  f"after {span.end} ({span.given} {m.duration_s:g} s), so it would never happen")
 
 
 def idle_link_key(m: Mission, link: Mapping[str, Any] | None, axes: Iterable[str] = ()) -> str | None:

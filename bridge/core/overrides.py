@@ -6,7 +6,9 @@ In:  ``bsst``'s flags or Python's keywords (:meth:`Overrides.of`): profile, cont
      (m/s, compass degrees), events (tables or ``T:KIND[:ARGS]``)
 Out: an :class:`Overrides` (a type that is wrong raises ``ConfigError`` naming the field, or the flag for
      ``--param`` and ``--at``); :meth:`Overrides.laid_over` the mission with them laid over it, validated again by
-     the mission; :func:`merged_failsafe_params`, :func:`merged_tables`, how two tables are laid one over the other
+     the mission; :func:`merged_failsafe_params`, :func:`merged_tables`, how two tables are laid one over the other;
+     :func:`laid_file_problem`, :func:`laid_trace_misfit`, a refused trace or profile the ``link`` override laid,
+     named as the flag that laid it (``link_flags``: the flags as typed)
 
 Every other value is checked by the part that owns it when :func:`bridge.core.flight.prepare` builds the flight.
 """
@@ -20,7 +22,9 @@ from pathlib import Path
 from typing import Any
 
 from bridge.autopilot.params import BY_NAME, ParamChange, VehicleParams, apply_params, params_as_failsafe, typed_value
-from bridge.link.model import absolute_link_paths, merge_link_tables
+from bridge.link.model import DIRECTIONS, absolute_link_paths, merge_link_tables
+from bridge.link.profile import load_link_profile
+from bridge.link.trace import read_trace
 from missions import Mission
 from missions.mission import law_spec_from
 from params import ConfigError
@@ -60,6 +64,8 @@ class Overrides:
     scatter_m: float | None = None  # [start] scatter_m, m: each seed starts in a disc this wide (missions.scatter)
     actuation: str | None = None  # the profile's actuation: wrench or motors
     link: Mapping[str, Any] | None = None  # over [link] (merge_link_tables): delay_ms ms, loss_pct %, blackouts s, ...
+    link_flags: Mapping[str, str] | None = None  # bsst's: the flag that laid each entry of link, by its place there
+    #   ("up.trace": "--link-trace"), kept as typed so that a refusal names it; None: each named by its own flag
     failsafe: Mapping[str, Any] | None = None  # over [failsafe], key by key: timeout_s s, descent_rate m/s, action
     sensors: Mapping[str, Any] | None = None  # over [sensors], key by key: {"set": "mocap"}
     estimator: str | None = None  # [estimator] kind: truth, raw or ekf
@@ -112,7 +118,7 @@ class Overrides:
         for f in ("rate_hz", "noise"):
             _check_type(f, getattr(self, f), Real, "a number")
         _check_type("seed", self.seed, Integral, "an integer")
-        for f in ("link", "failsafe", "sensors", "params"):
+        for f in ("link", "link_flags", "failsafe", "sensors", "params"):
             v = getattr(self, f)
             _check_type(f, v, Mapping, f"a table (a mapping: {{'set': {v!r}}}, as --sensors {v})"
                         if f == "sensors" and isinstance(v, str) else "a table (a mapping)")
@@ -170,7 +176,8 @@ class Overrides:
                                     actuation=self.actuation, link=link, failsafe=failsafe, sensors=sensors,
                                     estimator=estimator, params=params, wind=wind, events=events)
         except ConfigError as exc:  # the file alone was valid: what was laid over it made this, so say what that was
-            raise ConfigError(f"{exc} (with these laid over the mission: {table_settings(self.given())})") from None
+            laid = {k: v for k, v in self.given().items() if k != "link_flags"}  # (how it was named: not laid)
+            raise ConfigError(f"{exc} (with these laid over the mission: {table_settings(laid)})") from None
 
 
 def table_settings(table: Mapping[str, Any], prefix: str = "") -> str:
@@ -184,6 +191,57 @@ def table_settings(table: Mapping[str, Any], prefix: str = "") -> str:
 
 
 OVERRIDE_FIELDS = frozenset(f.name for f in fields(Overrides))
+OWN_FLAGS = {"trace": "link-trace", "profile": "link-profile"}  # a link override's entry -> its flag's stem
+
+
+def laid_flag(place: str, flags: Mapping[str, str] | None) -> str:
+    """The flag that laid ``place`` (``up.trace``, ``trace``, ``profile``) of a ``link`` override: the one typed
+    (``bsst``'s :attr:`Overrides.link_flags`), else the place's own (a Python caller's ``link={"up": {"trace": F}}``
+    is ``--up-link-trace``'s, ``{"trace": F}`` ``--link-trace``'s)."""
+    if flags and place in flags:
+        return flags[place]
+    d, _, key = place.rpartition(".")
+    return f"--{d}-{OWN_FLAGS[key]}" if d else f"--{OWN_FLAGS[key]}"
+
+
+def laid_file_problem(link: Mapping[str, Any], flags: Mapping[str, str] | None = None) -> str | None:
+    """The line refusing a trace or profile file that ``link`` (the flags', or a caller's ``link=``) lays over a
+    mission's ``[link]`` and that is bad on its own, named as the flag(s) that gave it (:func:`laid_flag`:
+    ``--link-trace``, ``--up-link-trace / --down-link-trace`` for one file given to both, ``--link-profile``), not as
+    the mission's key; None. Read again only once the table was refused (a trace may be millions of records)."""
+    link = absolute_link_paths(link, Path("."))
+    places = {"profile": link.get("profile"), "trace": link.get("trace")}
+    places |= {f"{d}.trace": t.get("trace") for d in DIRECTIONS if isinstance(t := link.get(d), Mapping)}
+    files: dict[tuple[str, bool], list[str]] = {}  # each file once (a profile's apart), with the flags that gave it
+    for place, path in places.items():
+        if isinstance(path, str) and path:
+            files.setdefault((path, place == "profile"), []).append(laid_flag(place, flags))
+    for (path, profile), named in files.items():
+        try:
+            load_link_profile(path) if profile else read_trace(path)
+        except ConfigError as exc:  # (a file's refusal opens with its path, its source; a profile's unknown name not)
+            flag = " / ".join(dict.fromkeys(named))
+            return f"{flag} {exc}" if exc.source is not None else f"{flag}: {exc}"
+    return None
+
+
+def laid_trace_misfit(exc: ConfigError, source: str, link: Mapping[str, Any], over: Overrides) -> str | None:
+    """``exc`` (``source``'s refusal of ``link.D.trace``, ``link`` the ``[link]`` flown: no rows of D, one, or shorter
+    than the mission) named as the flag that laid that trace over the mission (:func:`laid_flag`), not as the
+    mission's key it does not hold; None if ``over`` did not lay it (``--link-trace t.csv`` read ``sine.toml:
+    link.up.trace: ...``)."""
+    laid = over.link or {}
+    d = next((d for d in DIRECTIONS if exc.source == source and exc.key == f"link.{d}.trace"), None)
+    if d is None or exc.what is None:
+        return None
+    side = laid.get(d)
+    if isinstance(side, Mapping) and side.get("trace"):  # laid for D: it wins over the mission's
+        place = f"{d}.trace"
+    elif laid.get("trace") and not (link.get(d) or {}).get("trace") and not link.get("profile"):  # for both: D's own
+        place = "trace"  # (the mission's [link.D], a profile's) would win over it
+    else:
+        return None
+    return f"{laid_flag(place, over.link_flags)} {exc.what}"
 
 
 def _check_type(name: str, value: Any, kind: type | tuple[type, ...], what: str) -> None:

@@ -100,39 +100,39 @@ def _direction(t: Table, base: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _config(kw: Mapping[str, Any], direction: str, source: str, duration_s: float | None,
-            files: dict[str, TraceFile]) -> LinkConfig:
+            files: dict[str, TraceFile], span: str) -> LinkConfig:
     """One direction's :class:`LinkConfig` from its keys: the trace file read (once per file) and checked
     against the other keys, its rows for this direction and, unless it loops, the mission's length."""
     kw = dict(kw)
     path, loop = kw.pop("trace"), kw.pop("trace_loop")
     if not path:
         return LinkConfig(**kw)
-    where = f"{source}: link.{direction}"
+    key = f"link.{direction}.trace"
     clash = trace_clash(kw)
     if clash:
-        raise ConfigError(f"{where}: trace {path} cannot be combined with {clash} in the same direction: the "
-                          f"trace gives the delays and the losses (set those to 0 or remove them; [link] sets "
-                          f"both directions)")
+        raise ConfigError.at(source, f"link.{direction}", f"trace {path} cannot be combined with {clash} in the same "
+                             "direction: the trace gives the delays and the losses (set those to 0 or remove them; "
+                             "[link] sets both directions)")
     if path not in files:
         try:
             files[path] = read_trace(path)
         except ConfigError as exc:
-            raise ConfigError(f"{where}.trace: {exc}") from None
+            raise ConfigError.at(source, key, str(exc)) from None
     tf = files[path]
     why = records_problem(tf, direction)
     if why:
-        raise ConfigError(f"{where}.trace: {path} {why}")
+        raise ConfigError.at(source, key, f"{path} {why}")
     rec = tf.records(direction)
     assert rec is not None
     if rec.n < MIN_TRACE_RECORDS:  # no spacing, so no length: it would replay its one record for ever
         rows = "record" if tf.both is not None else f"{direction} record"
-        raise ConfigError(f"{where}.trace: {path} has 1 {rows}; a trace needs at least {MIN_TRACE_RECORDS} (it lasts "
-                          f"its last t_s plus its records' median spacing, and replays each record until the next): "
-                          f"for a constant link give delay_ms (or loss_pct = 100) instead")
+        raise ConfigError.at(source, key, f"{path} has 1 {rows}; a trace needs at least {MIN_TRACE_RECORDS} (it "
+                             "lasts its last t_s plus its records' median spacing, and replays each record until the "
+                             "next): for a constant link give delay_ms (or loss_pct = 100) instead")
     if duration_s is not None and not loop and rec.length_s < duration_s - LENGTH_SLACK_S:
-        raise ConfigError(f"{where}.trace: {path} lasts {rec.length_s:g} s ({rec.n} {direction} records), "
-                          f"shorter than the mission ({duration_s:g} s); loop it with trace_loop = true "
-                          f"(--link-trace-loop) or give a longer trace")
+        raise ConfigError.at(source, key, f"{path} lasts {rec.length_s:g} s ({rec.n} {direction} records), shorter "
+                             f"than {span} ({duration_s:g} s); loop it with trace_loop = true (--link-trace-loop) or "
+                             "give a longer trace")
     return LinkConfig(**kw, trace=DirectionTrace(path, rec, loop))
 
 
@@ -214,7 +214,7 @@ def jitter_cell(caps: Iterable[Mapping[str, Any]]) -> str:
 
 
 def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
-                    duration_s: float | None = None) -> LinkSettings:
+                    duration_s: float | None = None, span: str = "the mission") -> LinkSettings:
     """Validate a mission's ``[link]`` table.
 
     Keys of ``[link]`` itself: every per-direction key (a default for both directions), and
@@ -223,13 +223,15 @@ def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
     age of the newest state), and ``profile`` (a named link profile the table is laid over).
     ``[link.up]`` and ``[link.down]`` override per direction. ``seed`` defaults to the mission's
     seed; the two directions always draw different streams. A ``trace`` file is read here; with
-    ``duration_s`` (the mission's, s) one shorter than it is refused unless it loops. ``shared = true``: a
-    fleet's vehicles behind one radio (:mod:`bridge.link.radio`; one vehicle: its own link, the same flight).
+    ``duration_s`` (the mission's, s) one shorter than it is refused unless it loops (named as ``span``'s length:
+    ``shorter than the mission (30 s)``; ``bsst relay`` without a mission, its run's). ``shared = true``: a fleet's
+    vehicles behind one radio (:mod:`bridge.link.radio`; one vehicle: its own link, the same flight). Every refusal
+    a :class:`ConfigError` with its typed fields (``source``, ``key``, ``what``) set.
     """
     t = Table(data, source, "link")
     profile = t.string("profile", "")
     if profile:
-        return _with_profile(profile, data, source, seed, duration_s)
+        return _with_profile(profile, data, source, seed, duration_s, span)
     shared = t.boolean("shared", False)
     both = _direction(t, _defaults(seed))
     g = GuardConfig()
@@ -248,7 +250,7 @@ def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
         sub = t.table(d)
         kw = _direction(sub, both)
         sub.done()
-        dirs[d] = _config(kw, d, source, duration_s, files)
+        dirs[d] = _config(kw, d, source, duration_s, files, span)
     t.done()
     guard = GuardConfig(stale_s=stale_ms / 1000.0, stop_s=stop_ms / 1000.0, compensation=compensation,
                         lag_s=lag_ms / 1000.0)
@@ -256,22 +258,22 @@ def link_from_table(data: Mapping[str, Any], source: str, seed: int = 0,
 
 
 def _with_profile(name: str, data: Mapping[str, Any], source: str, seed: int,
-                  duration_s: float | None) -> LinkSettings:
+                  duration_s: float | None, span: str) -> LinkSettings:
     """``data`` laid over the ``[link]`` table of profile ``name``, validated (the profile alone first,
     so that a bad profile names its own file)."""
     try:
         prof = load_link_profile(name)
     except ConfigError as exc:
-        raise ConfigError(f"{source}: link.profile: {exc}") from None
+        raise ConfigError.at(source, "link.profile", str(exc)) from None
     if "shared" in prof.link:
-        raise ConfigError(f"{prof.path}: link.shared: a profile describes one radio; whether a fleet shares it is "
-                          f"the mission's ([link] shared) or --shared-link's")
+        raise ConfigError.at(str(prof.path), "link.shared", "a profile describes one radio; whether a fleet shares "
+                             "it is the mission's ([link] shared) or --shared-link's")
     link_from_table(prof.link, str(prof.path), seed)
     unmet = unmet_key(prof.link)  # a profile describes one link: a key of it that needs what it never gives
     if unmet:
-        raise ConfigError(f"{prof.path}: link.{unmet[0]}: {unmet[1]}")
+        raise ConfigError.at(str(prof.path), f"link.{unmet[0]}", unmet[1])
     over = {k: v for k, v in data.items() if k != "profile"}
-    return link_from_table(merge_link_tables(prof.link, over), source, seed, duration_s)
+    return link_from_table(merge_link_tables(prof.link, over), source, seed, duration_s, span)
 
 
 def merge_link_tables(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:

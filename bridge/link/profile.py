@@ -64,7 +64,7 @@ def load_link_profile(name: str) -> LinkProfile:
     if not isinstance(link, dict):
         raise t.error("link", "a link profile needs a [link] table")
     if "profile" in link:
-        raise ConfigError(f"{src}: link.profile: a profile cannot name another profile")
+        raise ConfigError.at(src, "link.profile", "a profile cannot name another profile")
     t.raw("fit", None)  # bsst link fit's goodness-of-fit figures: for the reader, not the model
     t.done()
     return LinkProfile(title, p, description, tuple(raw_sources), absolute_link_paths(link, p.parent))

@@ -141,14 +141,17 @@ def parse_trace(data: bytes, name: str) -> TraceFile:
     as Python objects, and 16 bytes per record (:class:`Records` holds arrays of doubles)."""
     reader = _Reader(name)
     pos, size = 0, FIRST_CHUNK_BYTES
-    while pos < len(data):
-        end = data.find(b"\n", pos + size)  # chunks end after a newline: no line, no UTF-8 character, is cut
-        end = len(data) if end < 0 else end + 1
-        chunk = data[pos:end]
-        if reader.cols is None or not reader.plain(chunk):
-            reader.by_line(chunk)
-        pos, size = end, CHUNK_BYTES
-    return reader.result()
+    try:
+        while pos < len(data):
+            end = data.find(b"\n", pos + size)  # chunks end after a newline: no line, no UTF-8 character, is cut
+            end = len(data) if end < 0 else end + 1
+            chunk = data[pos:end]
+            if reader.cols is None or not reader.plain(chunk):
+                reader.by_line(chunk)
+            pos, size = end, CHUNK_BYTES
+        return reader.result()
+    except ConfigError as exc:  # each refusal's line opens with the file's name: typed so (ConfigError.source)
+        raise ConfigError(str(exc), source=name) from None
 
 
 class _Reader:
