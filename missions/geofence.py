@@ -168,19 +168,19 @@ def geofence_from_plan(raw: Any, home: Home, source: str) -> Geofence | None:
             try:
                 if key == "polygons":
                     if not isinstance(z["polygon"], list) or not 3 <= len(z["polygon"]) <= MAX_POINTS:
-                        raise ValueError(f"polygon: expected 3 to {MAX_POINTS} points [lat, lon], "
-                                         f"got {str(z['polygon'])[:60]}")
+                        raise ConfigError(f"polygon: expected 3 to {MAX_POINTS} points [lat, lon], "
+                                          f"got {str(z['polygon'])[:60]}")
                     pts = [_local(home, lat, lon) for lat, lon in z["polygon"]]
                     zone = {"kind": "polygon", "inclusion": z["inclusion"], "points": pts}
                 else:
                     (lat, lon), radius = z["circle"]["center"], z["circle"]["radius"]
                     zone = {"kind": "circle", "inclusion": z["inclusion"], "center": _local(home, lat, lon),
                             "radius_m": radius}
-            except (KeyError, TypeError, ValueError) as exc:
+            except ConfigError as exc:  # a polygon or a point refused (_local): its reason alone
+                raise ConfigError.at(source, where, str(exc)) from None
+            except (KeyError, TypeError, ValueError):  # the zone's shape is not the plan's
                 shape = "polygon [[lat, lon], ...]" if key == "polygons" else "circle {center [lat, lon], radius}"
-                why = str(exc) if isinstance(exc, ValueError) and str(exc).startswith(("latitude", "polygon:")) \
-                    else f"expected inclusion and {shape}"
-                raise ConfigError(f"{source}: {where}: {why}") from None
+                raise ConfigError.at(source, where, f"expected inclusion and {shape}") from None
             zones.append(_zone(Table(zone, source, where)))
     if len(zones) > MAX_ZONES:
         raise ConfigError(f"{source}: geoFence: at most {MAX_ZONES} zones, got {len(zones)}")
@@ -188,15 +188,16 @@ def geofence_from_plan(raw: Any, home: Home, source: str) -> Geofence | None:
 
 
 def _local(home: Home, lat: Any, lon: Any) -> list[float]:
-    """[x, y] m in the paper frame of a plan's latitude and longitude (deg), checked to be a place on earth."""
+    """[x, y] m in the paper frame of a plan's latitude and longitude (deg), checked to be a place on earth and
+    within reach of the plan's home (else a ConfigError of the reason alone, which its caller names)."""
     la, lo = finite_float(lat), finite_float(lon)
     if la is None or lo is None or not (-90.0 <= la <= 90.0 and -180.0 <= lo <= 180.0):
-        raise ValueError(f"latitude {show(lat) if la is None else f'{la:g}'}, "
-                         f"longitude {show(lon) if lo is None else f'{lo:g}'}: not a place on earth")
+        raise ConfigError(f"latitude {show(lat) if la is None else f'{la:g}'}, "
+                          f"longitude {show(lon) if lo is None else f'{lo:g}'}: not a place on earth")
     x, y, _ = home.paper(la, lo, home.alt)
     kept = onto_bound(x, y, max(abs(x), abs(y)), COORD_M)  # a point on the bound comes back from the wire over it
     if kept is None:  # said in the plan's own terms (it was the metres it became)
-        raise ValueError(f"latitude {la:g}, longitude {lo:g}: {abs(x) / 1000.0:.3f} km {'north' if x >= 0 else 'south'}"
-                         f", {abs(y) / 1000.0:.3f} km {'west' if y >= 0 else 'east'} of the plan's home; a fence's "
-                         f"points lie within {COORD_M / 1000.0:g} km of it each way")
+        raise ConfigError(f"latitude {la:g}, longitude {lo:g}: {abs(x) / 1000.0:.3f} km "
+                          f"{'north' if x >= 0 else 'south'}, {abs(y) / 1000.0:.3f} km {'west' if y >= 0 else 'east'} "
+                          f"of the plan's home; a fence's points lie within {COORD_M / 1000.0:g} km of it each way")
     return list(kept)

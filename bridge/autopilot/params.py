@@ -198,12 +198,12 @@ class Refusal(Enum):
 
 
 class ParamRefused(ValueError):
-    """A parameter change that is not made; the message says why (it goes out in a STATUSTEXT), ``why`` what kind
-    of refusal it is (:class:`Refusal`)."""
+    """A parameter change that is not made; the message, ``NAME: what``, says why (it goes out in a STATUSTEXT),
+    ``what`` the reason alone, ``why`` what kind of refusal it is (:class:`Refusal`)."""
 
-    def __init__(self, message: str, why: Refusal = Refusal.VALUE) -> None:
-        super().__init__(message)
-        self.why = why
+    def __init__(self, name: str, what: str, why: Refusal = Refusal.VALUE) -> None:
+        super().__init__(f"{name}: {what}")
+        self.name, self.what, self.why = name, what, why
 
 
 def read_param(p: VehicleParams, name: str) -> float:
@@ -248,26 +248,32 @@ def typed_value(spec: ParamSpec, value: Any) -> float:
     taken as that integer: PARAM_VALUE, Python callers, ``1e6`` in a TOML file or a flag), a REAL32's a number;
     :class:`ParamRefused` if it is not one, or not one the parameter takes."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParamRefused(f"{spec.name}: expected a number, got {value!r}"[:200])
-    why = value_problem(spec, value)
+        raise ParamRefused(spec.name, f"expected a number, got {value!r}"[:198 - len(spec.name)])
+    why = _value_why(spec, value)
     if why:
-        raise ParamRefused(why)
+        raise ParamRefused(spec.name, why)
     return int(value) if spec.kind == INT32 else value
 
 
 def value_problem(spec: ParamSpec, value: float) -> str | None:
     """Why ``value`` cannot be ``spec``'s, or None (type, range, choices; :func:`in_range`): the one check of a
-    value, from a file, a flag, Python or the wire."""
+    value, from a file, a flag, Python or the wire: ``NAME: why``."""
+    why = _value_why(spec, value)
+    return None if why is None else f"{spec.name}: {why}"
+
+
+def _value_why(spec: ParamSpec, value: float) -> str | None:
+    """:func:`value_problem`'s reason alone."""
     if isinstance(value, int) and finite_float(value) is None:  # past the float range: isfinite would raise
-        return f"{spec.name}: {_range_text(spec)}, got {show(value)}"
+        return f"{_range_text(spec)}, got {show(value)}"
     if spec.kind == INT32 and not (math.isfinite(value) and value == int(value)):  # 1.5, nan, inf
-        return f"{spec.name}: an INT32, expected an integer {_allowed(spec)}, got {shown_value(value)}"
+        return f"an INT32, expected an integer {_allowed(spec)}, got {shown_value(value)}"
     if not math.isfinite(value):
-        return f"{spec.name}: must be finite, got {value}"
+        return f"must be finite, got {value}"
     if spec.choices is not None and int(value) not in spec.choices:
-        return f"{spec.name}: {shown_value(value)} is not one the vehicle flies; allowed: {_choices(spec.choices)}"
+        return f"{shown_value(value)} is not one the vehicle flies; allowed: {_choices(spec.choices)}"
     if not in_range(value, spec.lo, spec.hi):
-        return f"{spec.name}: {_range_text(spec)}, got {shown_value(value)}"
+        return f"{_range_text(spec)}, got {shown_value(value)}"
     return None
 
 
@@ -308,12 +314,12 @@ def change_param(p: VehicleParams, name: str, value: float, running: bool = True
     unknown name, a value out of range or of the wrong type, or, ``running``, one that acts only at start)."""
     spec = BY_NAME.get(name)
     if spec is None:
-        raise ParamRefused(f"{name}: no such parameter", Refusal.UNKNOWN)
-    why = value_problem(spec, value)
+        raise ParamRefused(name, "no such parameter", Refusal.UNKNOWN)
+    why = _value_why(spec, value)
     if why:
-        raise ParamRefused(why)
+        raise ParamRefused(name, why)
     if running and spec.at_start_only:
-        raise ParamRefused(f"{name}: takes effect at start only (--param {name}=N)", Refusal.READ_ONLY)
+        raise ParamRefused(name, f"takes effect at start only (--param {name}=N)", Refusal.READ_ONLY)
     value = min(max(value, spec.lo), spec.hi)  # one that rounds to a bound in float32 is that bound (in_range)
     if spec.failsafe_key == "action":
         return replace(p, failsafe=replace(p.failsafe, action=(spec.choices or {})[int(value)]))
@@ -373,10 +379,10 @@ def apply_params(start: VehicleParams, entries: Iterable[tuple[str, Any]], prefi
         spec = BY_NAME.get(name)
         try:
             if spec is None:
-                raise ParamRefused(f"{name}: {no_such_param(name)}", Refusal.UNKNOWN)
+                raise ParamRefused(name, no_such_param(name), Refusal.UNKNOWN)
             after = change_param(p, name, typed_value(spec, value), running=False)
-        except ParamRefused as exc:  # (its text "NAME: why": the name's own ": " is no end of it)
-            raise ConfigError(f"{prefix}{where(name, value)}: {str(exc).removeprefix(f'{name}: ')}") from None
+        except ParamRefused as exc:
+            raise ConfigError(f"{prefix}{where(name, value)}: {exc.what}") from None
         key = spec.failsafe_key
         if key is not None:
             other = by_setting.get(key)

@@ -121,8 +121,10 @@ def handovers_of(timeline: tuple[TimedEvent, ...], m: Mission) -> tuple[tuple[fl
                              f"([link] {guard[0]}); a handover changes the two directions only", where)
         try:
             ls = link_from_table(table, m.source, seed=m.seed, duration_s=m.duration_s)
-        except ConfigError as exc:
-            raise EventError(e, str(exc).removeprefix(m.source + ": "), where) from None
+        except ConfigError as exc:  # a key of the handover's own table, in the event's place; another file's whole
+            own = exc.source == m.source and exc.what is not None
+            raise EventError(e, (f"{exc.key}: {exc.what}" if exc.key else exc.what) if own else str(exc), where) \
+                from None
         unmet = unmet_key(table)  # a handover's table is its own: a key of it that needs what it never gives
         if unmet:
             raise EventError(e, f"link.{unmet[0]}: {unmet[1]}", where)

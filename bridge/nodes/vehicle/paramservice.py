@@ -114,10 +114,10 @@ class ParamService:
         want = PARAM_TYPES[spec.kind]
         try:
             if m.param_type not in PARAM_TYPES.values():  # PX4 main: TYPE_UNSUPPORTED for any but INT32, REAL32
-                raise ParamRefused(f"{name}: the set says type {m.param_type}: the parameters here are INT32 or "
+                raise ParamRefused(name, f"the set says type {m.param_type}: the parameters here are INT32 or "
                                    "REAL32", Refusal.TYPE_UNSUPPORTED)
             if m.param_type != want:
-                raise ParamRefused(f"{name}: is {spec.kind}, the set says type {m.param_type}", Refusal.TYPE)
+                raise ParamRefused(name, f"is {spec.kind}, the set says type {m.param_type}", Refusal.TYPE)
             changed = self.sim.change_param(name, param_from_wire(m.param_value, want), self.sysid)
             if changed is not None:  # its sender, typed: the session records who changed what, and when
                 changed.by = self.authority.sender(m, addr, link)
