@@ -831,6 +831,17 @@ def test_a_link_refused_without_a_file_names_no_file(files, capsys):
     assert line.startswith("bsst: command line: ") and "file's" not in line and "laid over" not in line, line
 
 
+def test_a_refused_path_that_begins_with_bsst_follows_bsst_colon(files, capsys, monkeypatch):
+    """``bsst sim bsstm.toml`` of a missing file printed ``bsstm.toml: no such file``, without ``bsst: ``, until the
+    third wave's forty-third session: ``bsst``'s main told a refusal that opens with its own command (``bsst link
+    extract: ...``) by its text's opening "bsst"; now by its typed source (params.ConfigError.source)."""
+    monkeypatch.chdir(files.root)
+    assert _refused(capsys, ["sim", "bsstm.toml"], "bsstm.toml") == "bsst: bsstm.toml: no such file"
+    assert _refused(capsys, ["link", "extract", "bsstdir"], "bsstdir") == (  # (one that opens with its command: kept)
+        "bsst link extract: bsstdir: no such file or directory; give a real-time run directory, or the vehicle's tlog "
+        "and the controller's tlog")
+
+
 @pytest.mark.skipif(os.geteuid() == 0, reason="root reads a file of mode 000 (the socket-path cases cover it)")
 def test_a_file_without_read_permission(files, capsys):
     files.regular.write_text(TINY)

@@ -51,6 +51,13 @@ def _parser() -> argparse.ArgumentParser:
     return build_parser()
 
 
+def _opens_with_command(exc: ConfigError) -> bool:
+    """Whether a refusal opens with the command it refuses for (its typed ``source``, ``bsst link extract``: a part's
+    own, raised for that command), not with a file or flag (``bsstm.toml: no such file`` was once printed bare)."""
+    words = (exc.source or "").split(" ")
+    return len(words) > 1 and words[0] == "bsst"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     own = threading.current_thread() is threading.main_thread() and argv is not None  # an in-process caller's
     handler = signal.getsignal(signal.SIGINT) if own else None
@@ -58,8 +65,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = _parser().parse_args(argv)  # (building it imports ~0.1 s: a Ctrl-C there is said below, not traced)
         with input_scope():  # the files this command reads: --overwrite never replaces one (params.inputs_read)
             return args.func(args)
-    except (UsageError, ConfigError) as exc:
-        print(f"bsst: {exc}" if not str(exc).startswith("bsst") else str(exc), file=sys.stderr)
+    except (UsageError, ConfigError) as exc:  # a usage error's line opens with its command (bsst, bsst sim) already
+        own = isinstance(exc, UsageError) or _opens_with_command(exc)
+        print(exc if own else f"bsst: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("bsst: interrupted", file=sys.stderr)

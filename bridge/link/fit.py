@@ -134,7 +134,8 @@ def loadable(fits: dict[str, DirectionFit], name: str) -> dict[str, Any]:
     try:
         link_from_table(table, name)
     except ConfigError as exc:
-        raise ConfigError(f"bsst link fit: the fitted table is not one the link model takes: {exc}") from None
+        raise ConfigError.at("bsst link fit", None, f"the fitted table is not one the link model takes: {exc}") \
+            from None
     return table
 
 

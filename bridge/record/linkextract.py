@@ -45,6 +45,7 @@ from params import ConfigError, read_regular_file, unreachable
 
 CLOCKS = ("same", "timesync")
 RUN_INPUTS = ("vehicle.tlog", "controller.tlog", "vehicle.bin", "controller.bin", "summary.json")  # what it reads
+EXTRACT = "bsst link extract"  # the command its refusals open with (ConfigError.source)
 _ODOMETRY = 331
 _TARGETS = (93, 139)  # HIL_ACTUATOR_CONTROLS, SET_ACTUATOR_CONTROL_TARGET: both open with time_usec
 _HEARTBEAT, _AUTOPILOT_INVALID = 0, 8  # a HEARTBEAT's autopilot (payload byte 5): MAV_AUTOPILOT_INVALID is none
@@ -204,9 +205,9 @@ def _check_order(vehicle: Sequence[Frame], controller: Sequence[Frame], ends: di
                     f"ODOMETRY)")
     if v_ctl:
         said.append(f"{v_name} looks like the controller's end ({_ids(v_ctl)} sent actuator targets)")
-    raise ConfigError(f"bsst link extract: the tlogs are given the wrong way round"
-                      f"{' (both ends say so)' if c_pilots and v_ctl else ''}: {' and '.join(said)}; give the "
-                      f"vehicle's tlog first: bsst link extract {c_name} {v_name}")
+    raise ConfigError.at(EXTRACT, None, f"the tlogs are given the wrong way round"
+                         f"{' (both ends say so)' if c_pilots and v_ctl else ''}: {' and '.join(said)}; give the "
+                         f"vehicle's tlog first: bsst link extract {c_name} {v_name}")
 
 
 def _ids(sources: set[Source]) -> str:
@@ -253,7 +254,7 @@ def check_run_dir(path: str | Path) -> Path:
     give = "give a real-time run directory, or the vehicle's tlog and the controller's tlog"
     why = unreachable(p)
     if why:
-        raise ConfigError(f"bsst link extract: {p}: cannot read ({why}); {give}")
+        raise ConfigError.at(EXTRACT, None, f"{p}: cannot read ({why}); {give}")
     if p.is_dir():
         return p
     if not p.exists():
@@ -262,7 +263,7 @@ def check_run_dir(path: str | Path) -> Path:
         why = "one tlog (the other end's is missing)" if p.suffix.lower() == ".tlog" else "a file, not a run directory"
     else:
         why = "not a run directory"
-    raise ConfigError(f"bsst link extract: {p}: {why}; {give}")
+    raise ConfigError.at(EXTRACT, None, f"{p}: {why}; {give}")
 
 
 def extract_run_dir(path: str | Path, clock: str = "same") -> Extraction:

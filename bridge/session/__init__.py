@@ -177,7 +177,7 @@ def sitl(
                                   f"mission time, in [0, {AWAIT_DURATION_S:g}) s; the ground station's mission, once "
                                   "downloaded, must last longer than it")
     elif mission is None:
-        raise ConfigError("bsst sitl: give a mission file (or --await-mission)")
+        raise ConfigError.at("bsst sitl", None, "give a mission file (or --await-mission)")
     if key is not None:
         key_from_file(key)  # a missing, empty or world-readable key file is bad input, before anything starts
     over = Overrides.of(overrides, **keywords)

@@ -256,8 +256,11 @@ class Session:
     def _died(self, child: Child, starting: bool = False) -> None:
         """A child is gone: say so by name; bad input (exit 2) is the user's, anything else ours."""
         err = child.last_error()
-        if starting and child.proc.returncode == 2:
-            raise ConfigError(err.removeprefix("bsst: ") or f"{child.name}: bad input")
+        if starting and child.proc.returncode == 2:  # the line its bsst printed (across processes, its text is all
+            # there is): "bsst: WHY", or one that opens with its command, "bsst relay: WHY", which stays so (source)
+            said = err.removeprefix("bsst: ")
+            opens = err.partition(": ")[0] if said == err else None
+            raise ConfigError(said or f"{child.name}: bad input", source=opens)
         self.died = child.name
         self._note("died", f"{child.name} (pid {child.pid}) {child.exit_text()}" + (f": {err}" if err else ""),
                    "session")
