@@ -11,6 +11,11 @@ Walks every module of those packages with ``ast`` (as python-control's ``kwargs_
   has type hints on all its arguments and its return.
 
 Every failure names ``file:line``. There is no allow-list: the limits hold for every module.
+
+And, in those packages and ``params``: no ``except ... as exc`` reads its exception's own text to re-anchor or reword
+it (``str(exc).startswith(f"{src}: ")``, ``str(exc).replace("the mission (", ...)``, ``"x" in str(exc)``): a
+refusal's parts are its typed fields (``params.ConfigError``'s ``source``, ``key``, ``what``; ``ParamRefused.what``),
+set by the code that raises. Only a third party's words are read, each named in :data:`OTHERS_WORDS`.
 """
 
 from __future__ import annotations
@@ -64,6 +69,44 @@ def size_problems(path: str, src: str, tree: ast.Module) -> dict[str, str]:
         length = fn.end_lineno - fn.lineno + 1
         if length > MAX_FUNCTION_LINES:
             out[f"{path}::{fn.name}"] = f"{path}:{fn.lineno}: {fn.name} is {length} lines, over {MAX_FUNCTION_LINES}"
+    return out
+
+
+TEXT_READS = {"startswith", "endswith", "removeprefix", "removesuffix", "replace", "partition", "rpartition", "find",
+              "index"}  # what re-anchors or rewords a text (not split(): a third party's whitespace made one line)
+OTHERS_WORDS = {("bridge/link/trace.py", "end of data"): "csv's unclosed quote"}  # (module, words read): whose
+
+
+def _text_of(node: ast.AST, name: str) -> bool:
+    """Whether ``node`` is the text of the exception bound to ``name``: ``str(name)``, ``name.args[...]``."""
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "str":
+        return len(node.args) == 1 and isinstance(node.args[0], ast.Name) and node.args[0].id == name
+    if isinstance(node, ast.Subscript):
+        node = node.value
+    return isinstance(node, ast.Attribute) and node.attr == "args" and isinstance(node.value, ast.Name) \
+        and node.value.id == name
+
+
+def text_read_problems(path: str, tree: ast.Module) -> list[str]:
+    """A line per place where an ``except ... as exc`` reads ``exc``'s text (:data:`TEXT_READS`, or ``in``),
+    but for a third party's words (:data:`OTHERS_WORDS`)."""
+    out = []
+    for handler in ast.walk(tree):
+        if not isinstance(handler, ast.ExceptHandler) or handler.name is None:
+            continue
+        for node in ast.walk(handler):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in TEXT_READS \
+                    and _text_of(node.func.value, handler.name):
+                words = node.args[0] if node.args else None
+            elif isinstance(node, ast.Compare) and isinstance(node.ops[0], (ast.In, ast.NotIn)) \
+                    and _text_of(node.comparators[0], handler.name):
+                words = node.left
+            else:
+                continue
+            said = words.value if isinstance(words, ast.Constant) else None
+            if (path, said) not in OTHERS_WORDS:
+                out.append(f"{path}:{node.lineno}: reads the text of {handler.name}: read its typed fields instead "
+                           "(params.ConfigError's source, key, what)")
     return out
 
 
@@ -138,6 +181,18 @@ def test_every_module_opens_with_a_docstring_with_its_ports(parsed: Parsed) -> N
 def test_public_functions_have_type_hints(parsed: Parsed) -> None:
     problems = [p for path, _, tree in parsed for p in hint_problems(path, tree)]
     assert not problems, "\n".join(problems)
+
+
+def test_no_refusal_is_reworded_by_matching_its_own_text() -> None:
+    """Until the third wave's forty-third session, eight places re-anchored or reworded a refusal by its words
+    (``bridge/core/flight.py``'s ``str(exc).startswith(f"{src}: ")`` among them), and one named the flag the user did
+    not type: ``--up-link-trace F --down-link-trace F`` was refused as ``--link-trace F``."""
+    found = [p for pkg in ("bridge", "missions", "params") for f in sorted((ROOT / pkg).rglob("*.py"))
+             for p in text_read_problems(f.relative_to(ROOT).as_posix(), ast.parse(f.read_text()))]
+    assert not found, "\n".join(found)
+    bad = ast.parse('try:\n    f()\nexcept ValueError as exc:\n    if str(exc).startswith("m.toml: "):\n        raise\n'
+                    'except KeyError as e:\n    g("limit" in str(e), e.args[0].replace("a", "b"))\n')
+    assert [p.split(": ")[0] for p in text_read_problems("x/m.py", bad)] == ["x/m.py:4", "x/m.py:7", "x/m.py:7"]
 
 
 @pytest.mark.parametrize("source, rule", [
