@@ -180,6 +180,13 @@ class SimVehicle:
         if wind is not None:
             wind.gusts = [replace(g, t_s=g.t_s + t0) for g in wind.gusts]
 
+    def start_mission_clock_now(self) -> None:
+        """A flight with no target yet begins now (a ground station's, flown by the on-board controller): the
+        mission's time 0 is the control step that begins at or after now, the first it flies whole (once per
+        vehicle, as :meth:`start_mission_clock`: a controller's first target later moves it no more)."""
+        n = math.ceil(self.plant.t / self._period_s - 1e-9)
+        self.start_mission_clock(n * self._period_s)
+
     def arm(self, from_hold: bool = False) -> None:
         """Arm and take offboard commands (from failsafe or landed too). Not while armed in a mode a
         ground station chose (HOLD, LAND, TAKEOFF): the vehicle is the ground station's until it

@@ -292,7 +292,17 @@ class Commander:
         self.sim.set_mode(mode, takeoff_alt_m, hold_at)
         attribute(self.sim.events, n0, by)
         self.clocking.after_mode(was)
+        if by.link == "gcs" and self.sim.armed and self.sim.mode in GROUND_MODES:
+            self._ground_flight()
         return mavlink.MAV_RESULT_ACCEPTED
+
+    def _ground_flight(self) -> None:
+        """A ground station's flight, flown by the vehicle's own controller, is on: with no target yet (real time)
+        the mission's clock starts now (its timeline, gusts and disturbance: docs/weather.md), unless the flight of
+        record is a controller's (one pinned, ``--controller-from``, as bsst sitl's; a mission awaited): its first
+        target's state stays time 0, as the session's trace's."""
+        if not self.cfg.await_mission and self.cfg.controller_from is None:
+            self.sim.start_mission_clock_now()
 
     def _not_now(self, why: str) -> int:
         """A mode that cannot run now: TEMPORARILY_REJECTED (PX4's answer), a STATUSTEXT saying why."""
@@ -440,6 +450,7 @@ class Commander:
                     self.clocking.ground_takes_over(now)
                 if from_gcs:
                     self.pre_start.ground_armed(now)  # in HOLD on the ground: PX4's pre-takeoff timeout
+                    self._ground_flight()
                 return mavlink.MAV_RESULT_ACCEPTED
             if not was_offboard:
                 self.ports.new_flight(from_gcs)  # no target of the last flight is in force
