@@ -180,12 +180,23 @@ class SimVehicle:
         if wind is not None:
             wind.gusts = [replace(g, t_s=g.t_s + t0) for g in wind.gusts]
 
+    @property
+    def mission_t0(self) -> float | None:
+        """Plant time (s) of the mission's time 0: 0 offline and in lockstep; real time, None until it is known."""
+        return self._mission_t0
+
     def start_mission_clock_now(self) -> None:
         """A flight with no target yet begins now (a ground station's, flown by the on-board controller): the
         mission's time 0 is the control step that begins at or after now, the first it flies whole (once per
         vehicle, as :meth:`start_mission_clock`: a controller's first target later moves it no more)."""
         n = math.ceil(self.plant.t / self._period_s - 1e-9)
         self.start_mission_clock(n * self._period_s)
+
+    def not_reached(self) -> list[str]:
+        """The timeline's events and the ``[wind]`` gusts never acted on (``t=T s: what``, mission time, in order):
+        the flight ended, or the vehicle stopped, before their time, or its time 0 never came."""
+        late = sorted([*((e.t_s, e.text()) for e in self._pending_events), *self._pending_notes], key=lambda n: n[0])
+        return [f"t={t:.3f} s: {text}" for t, text in late]
 
     def arm(self, from_hold: bool = False) -> None:
         """Arm and take offboard commands (from failsafe or landed too). Not while armed in a mode a

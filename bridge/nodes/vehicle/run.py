@@ -2,8 +2,8 @@
 
 In:  the flight (mission, profile, parameters), the vehicle's configuration, a run directory (or none)
 Out: its reports on stdout (JSON lines, :mod:`bridge.nodes.report`); on stderr, one line each for a flight that did
-     not end well (:mod:`.verdict`) and for a controller refused for flying the other actuation mode; the exit
-     status, 0 or 1 (a flight that did not end well)
+     not end well and for a timeline event it never flew (:mod:`.verdict`) and for a controller refused for flying
+     the other actuation mode; the exit status, 0 or 1 (a flight that did not end well, an event not flown)
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from bridge.core.flight import Flight
 from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.vehicle.config import VehicleConfig
 from bridge.nodes.vehicle.node import Vehicle
-from bridge.nodes.vehicle.verdict import flights_not_ended_well
+from bridge.nodes.vehicle.verdict import flights_not_ended_well, timeline_not_reached
 from bridge.record.runlog import side_dir
 
 
@@ -28,7 +28,7 @@ def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = Non
     on_stop_signals(v.stop)
     v.run()
     v.report_stats()
-    said = flights_not_ended_well(v.sim.events)
+    said = flights_not_ended_well(v.sim.events) + timeline_not_reached(v.sim)
     mismatch = v.targets.mismatch
     sys.stderr.writelines(f"bsst vehicle: {why}\n" for why in said)
     if mismatch.refused:

@@ -1,11 +1,17 @@
 """``bsst vehicle`` alone: how its flights ended, for its exit status.
 
 In:  the vehicle's events in the order it said them (:class:`~bridge.autopilot.vehicleevents.Event`: t s, kind,
-     text, a ``mode`` event's mode and whether it acted on an armed vehicle)
+     text, a ``mode`` event's mode and whether it acted on an armed vehicle); its timeline's events not acted on
+     and its mission's time 0 (:class:`~bridge.autopilot.simvehicle.SimVehicle`, plant time s)
 Out: :func:`flights_not_ended_well`: one line each for a flight the plant ended (``crashed``, ``diverged``, a
      ``collision``, a ground station's ``terminated``) and for a failsafe the flight ended in (no arm, no mode
      selected armed, after it: a controller's or a ground station's taking it back), as ``bsst sitl`` names those
      outcomes; any one makes the exit status 1
+
+:func:`timeline_not_reached`: one line each for an event of the mission's timeline (``[[events]]``, a ``[wind]``
+gust) never acted on by a vehicle that flew (armed at least once): the vehicle was stopped before its time, or its
+flight's time 0 never came (real time: no controller's target, no ground station's flight); any one makes the exit
+status 1 too, as ``summary.json``'s ``ended_by.not_reached`` is said by ``bsst sitl``
 
 ``bsst controller`` alone says what went wrong as far as it knows (bridge.nodes.offboard.run); the vehicle alone,
 stopped (Ctrl-C, SIGTERM), says what its own flights came to. A clean stop of a vehicle whose flights ended well (or
@@ -16,6 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from bridge.autopilot.simvehicle import SimVehicle
 from bridge.autopilot.vehicleevents import Event
 
 PLANT_ENDS = ("crashed", "diverged", "collision", "terminated")  # the flight's end, its plant's (or motors cut)
@@ -37,3 +44,14 @@ def flights_not_ended_well(events: Iterable[Event]) -> list[str]:
         said.append((failsafe.t, f"failsafe at t={failsafe.t:.3f} s: {failsafe.shown}: its flight ended in it (no "
                                  "arm, no mode selected, took it back)"))
     return [text for _, text in sorted(said, key=lambda s: s[0])]
+
+
+def timeline_not_reached(sim: SimVehicle) -> list[str]:
+    """The timeline's events a vehicle that flew never acted on, one line each, in mission time order (module
+    docstring); empty if it never armed (nothing was flown, so nothing was asked of the timeline) or all acted."""
+    if not any(e.kind == "armed" for e in sim.events):
+        return []
+    t0 = sim.mission_t0
+    why = ("its flight's time 0 never came (no controller's target, no ground station's flight)" if t0 is None
+           else f"the vehicle stopped at t={sim.t - t0:.3f} s of its flight's time")
+    return [f"not reached: {late}: {why}" for late in sim.not_reached()]
