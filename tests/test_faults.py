@@ -452,3 +452,32 @@ def test_a_real_time_plant_run_before_its_flight_is_disturbed_on_the_flights_tim
         late.advance()
     assert late.plant.state[4] > 0.01  # flown, off the ground
     assert late.plant.state == pytest.approx(offline.plant.state, abs=1e-9)
+
+
+def test_a_ground_stations_real_time_flight_flies_its_timeline_and_disturbance_from_its_arm() -> None:
+    """A real-time vehicle's plant runs 1.664 s on the ground, then a ground station arms it in TAKEOFF
+    (Commander: SimVehicle.start_mission_clock_now): flown by its own controller from there, its flight is the one
+    armed at the start, the robust mission's sine disturbance and a wind step at 0.2 s included, the wind said 0.2 s
+    into it; a controller's first target later (start_mission_clock) moves its time 0 no more. Until the forty-third
+    session such a flight held both for a target that never came (no wind, no disturbance)."""
+    mission = load_mission(ROOT / "missions" / "robust.toml").with_overrides(
+        duration_s=1.0, events=({"t_s": 0.2, "kind": "wind", "speed_mps": 3.0},))
+    flight = prepare(mission)
+    offline, late = flight.make_vehicle(), flight.make_vehicle()
+    late.hold_timeline()
+    for _ in range(416):  # disarmed on the ground until the ground station's arm
+        late.advance()
+    k0 = 416
+    for v in (offline, late):
+        v.set_mode("takeoff")
+        v.arm_in_mode()
+    late.start_mission_clock_now()
+    late.start_mission_clock(k0 / mission.rate_hz + 0.1)  # a controller's first target, later: no change
+    for _ in range(100):  # 0.4 s of the takeoff
+        offline.advance()
+        late.advance()
+    assert late.plant.state[4] > 0.01  # flown, off the ground
+    assert late.plant.state == pytest.approx(offline.plant.state, abs=1e-9)
+    [(t_off, said)] = [(e.t, e.text) for e in offline.events if e.kind == "wind"]
+    assert [(e.t - k0 / mission.rate_hz, e.text) for e in late.events if e.kind == "wind"] == [
+        (pytest.approx(t_off, abs=1e-9), said)]
