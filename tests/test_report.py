@@ -13,6 +13,7 @@ import pytest
 from bridge.autopilot.vehicleevents import ITSELF, ParamChanged, Sender
 from bridge.autopilot.vehicleevents import Event as VehicleEvent
 from bridge.nodes.report import (
+    BadInput,
     Done,
     Event,
     Kind,
@@ -24,6 +25,7 @@ from bridge.nodes.report import (
     parse_line,
     to_line,
 )
+from params import ConfigError
 
 GCS = Sender(255, 190, "127.0.0.1", 14550, "gcs")
 
@@ -43,6 +45,10 @@ EVERY_KIND = [
     Done("completed"),
     Done("aborted", True, "vehicle silent for 2 s", silent=True),
     Done("aborted", False, "the vehicle was switched to HOLD: no more targets sent", "HOLD"),
+    BadInput("--gcs udpin:127.0.0.1:5: cannot bind (Address already in use)", "--gcs udpin:127.0.0.1:5", None,
+             "cannot bind (Address already in use)"),
+    BadInput("bsst relay: unrecognized arguments: --bogus", "bsst relay", None, "unrecognized arguments: --bogus"),
+    BadInput("missions/x.toml: no such file"),
 ]
 
 
@@ -78,6 +84,9 @@ def test_event_times_are_reported_to_the_millisecond():
     '{"report": "event", "t": 1.0, "kind": "end", "text": "x", "by": null, "answers": "end"}',
     '{"report": "warning", "text": 5}',
     '{"report": "done", "outcome": "aborted", "silent": 1}',  # a frozen vehicle is killed on it: a bool only
+    '{"report": "bad_input", "text": 5}',
+    '{"report": "bad_input", "text": "x", "source": 1}',
+    '{"report": "bad_input"}',
     "relay: listening on 127.0.0.1:5",  # a person's line, not a report
 ])
 def test_a_line_that_is_not_a_report_is_none_not_a_traceback(line):
@@ -119,3 +128,14 @@ def test_a_sender_is_shown_as_the_written_suffix():
     assert str(GCS) == "255:190 127.0.0.1:14550 gcs" and GCS.suffix == " [by 255:190 127.0.0.1:14550 gcs]"
     assert str(ITSELF) == "vehicle" and ITSELF.is_vehicle and not GCS.is_vehicle
     assert Sender.from_dict(GCS.as_dict()) == GCS and Sender.from_dict(ITSELF.as_dict()) is ITSELF
+
+
+def test_a_bad_input_report_is_its_refusal_again_with_its_typed_fields():
+    """A session's child refused at its start reports its ConfigError (``bad_input``); the session raises it again
+    from the report's fields (bridge.session.session.Session._died), not from the child's stderr line."""
+    refused = ConfigError.at("m.toml", "link.up.trace", "no such file")
+    again = parse_line(to_line(BadInput.of(refused)))
+    assert isinstance(again, BadInput)
+    e = again.error()
+    assert (str(e), e.source, e.key, e.what) == ("m.toml: link.up.trace: no such file", "m.toml", "link.up.trace",
+                                                 "no such file")

@@ -2,7 +2,8 @@
 
 In:  argv (``sys.argv[1:]`` by default), and the mission, sweep and key files it names
 Out: the command's work and its summary on stdout; an exit status; bad input as one line
-     ``bsst: ...`` on stderr
+     ``bsst: ...`` on stderr, and from a session's child (``bsst vehicle``, ``controller``, ``relay``) as its
+     ``bad_input`` report on stdout too (:class:`bridge.nodes.report.BadInput`: the session reads that, typed)
 
 - :mod:`bridge.cli.flags`      flag types with their ranges
 - :mod:`bridge.cli.linkflags`  the link flags and their ``[link]`` overrides
@@ -37,7 +38,7 @@ from collections.abc import Sequence
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from bridge.cli.commands import EXIT_BAD_INPUT, EXIT_FAILED, build_parser, print_summary
-from bridge.cli.flags import UsageError
+from bridge.cli.flags import UsageError, as_config_error, refusal_line
 from bridge.cli.linkflags import link_table_from_args
 from params import ConfigError, input_scope
 
@@ -51,11 +52,14 @@ def _parser() -> argparse.ArgumentParser:
     return build_parser()
 
 
-def _opens_with_command(exc: ConfigError) -> bool:
-    """Whether a refusal opens with the command it refuses for (its typed ``source``, ``bsst link extract``: a part's
-    own, raised for that command), not with a file or flag (``bsstm.toml: no such file`` was once printed bare)."""
-    words = (exc.source or "").split(" ")
-    return len(words) > 1 and words[0] == "bsst"
+REPORTING = ("vehicle", "controller", "relay")  # the commands whose stdout is reports (bridge.nodes.report)
+
+
+def _reports(argv: Sequence[str] | None) -> bool:
+    """Whether this command's stdout is a session child's reports (``bsst vehicle``, ``controller``, ``relay``: the
+    command line's first word, as a session gives it, bridge.session.commands): its refusal is one of them too."""
+    given = list(sys.argv[1:] if argv is None else argv)
+    return bool(given) and given[0] in REPORTING
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -66,8 +70,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         with input_scope():  # the files this command reads: --overwrite never replaces one (params.inputs_read)
             return args.func(args)
     except (UsageError, ConfigError) as exc:  # a usage error's line opens with its command (bsst, bsst sim) already
-        own = isinstance(exc, UsageError) or _opens_with_command(exc)
-        print(exc if own else f"bsst: {exc}", file=sys.stderr)
+        refused = as_config_error(exc)
+        print(refusal_line(refused), file=sys.stderr)
+        if _reports(argv):  # a session's child: the refusal as a report too, the session's to read (not the line)
+            from bridge.nodes.process import report_printer  # lazy: a refusal's only (the report's modules)
+            from bridge.nodes.report import BadInput  # lazy: as above
+
+            report_printer()(BadInput.of(refused))
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("bsst: interrupted", file=sys.stderr)

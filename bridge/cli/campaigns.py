@@ -152,23 +152,23 @@ def _sweep(args: argparse.Namespace) -> int:
     for d in ("up", "down"):
         clash = [a for a in spec.grid.swept() if a in fixed.get(d, {})]
         if clash:
-            raise UsageError(f"bsst sweep: --{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
+            raise UsageError("bsst sweep", f"--{d}-{clash[0].split('_')[0]} conflicts with the swept {clash[0]} "
                              f"(a swept value applies to both directions)")
     swept = {a: getattr(spec.grid, a) for a in LINK_AXES if getattr(spec.grid, a)}  # the link axes: each cell's
     trace = trace_flag(args)
     if swept and trace:
         a = next(iter(swept))
         given = f"--{SHORT[a]}" if a in axes else f"grid.{a}"
-        raise UsageError(f"bsst sweep: {given} with {trace}: the trace gives the link's {', '.join(LINK_AXES)}, so "
+        raise UsageError("bsst sweep", f"{given} with {trace}: the trace gives the link's {', '.join(LINK_AXES)}, so "
                          f"{a} cannot be swept over it; drop one of them")
     sensors = {"set": args.sensors} if args.sensors is not None else None
     unread = unread_problem(spec.grid.estimator or (mission_value(spec.mission, "estimator"),), "the sensor set")
     if sensors is not None and unread:  # (no cell reads the sensors: every one flies the set's truth)
-        raise UsageError(f"bsst sweep: --sensors {args.sensors}: {unread}")
+        raise UsageError("bsst sweep", f"--sensors {args.sensors}: {unread}")
     laid = fixed or sensors or args.scatter is not None
     clash = guard_flag_refusal(args, spec.mission.link, spec.mission.source)  # (named as the flag, not the key)
     if clash:
-        raise UsageError(f"bsst sweep: {clash}")
+        raise UsageError("bsst sweep", clash)
     # fixed for every cell, laid over by the one path to its parts, which names a bad mission, and a key of its
     # [link] or [wind] that would change nothing (a swept --loss gives a burst_len its loss, a swept --turbulence a
     # turbulence_scaling its turbulence: every axis given, as each cell lays it)
@@ -178,10 +178,10 @@ def _sweep(args: argparse.Namespace) -> int:
                          axes=spec.grid.swept(), laid_named=True)
         idle = idle_link_flag(args, [flight.link], swept, cells=True)  # (None: no such flag given)
         if idle:
-            raise UsageError(f"bsst sweep: {idle}")
+            raise UsageError("bsst sweep", idle)
         spec = replace(spec, mission=flight.mission)
     if args.resume and args.out is None:
-        raise UsageError("bsst sweep: --resume needs --out DIR (the sweep to resume)")
+        raise UsageError("bsst sweep", "--resume needs --out DIR (the sweep to resume)")
     client = connect_dask(args.dask) if args.dask else None
     try:
         res = run_sweep(spec, jobs=args.jobs, client=client, out=args.out, write=True, resume=args.resume,
@@ -327,15 +327,15 @@ def _margin(args: argparse.Namespace) -> int:
     fixed = link_table_from_args(args)
     for d in ("up", "down"):
         if args.over in fixed.get(d, {}):
-            raise UsageError(f"bsst margin: a {args.over} flag conflicts with --over {args.over}")
+            raise UsageError("bsst margin", f"a {args.over} flag conflicts with --over {args.over}")
     trace = trace_flag(args)
     if args.over in LINK_AXES and trace:
-        raise UsageError(f"bsst margin: --over {args.over} with {trace}: the trace gives the link's "
+        raise UsageError("bsst margin", f"--over {args.over} with {trace}: the trace gives the link's "
                          f"{', '.join(LINK_AXES)}, so {args.over} cannot be searched over it; drop {trace}, or "
                          "search --over noise or wind_mps")
     sensing = sensor_overrides_from_args(args)
     if args.over == "noise" and sensing["noise"] is not None:
-        raise UsageError("bsst margin: --noise conflicts with --over noise (the noise scale is what is searched)")
+        raise UsageError("bsst margin", "--noise conflicts with --over noise (the noise scale is what is searched)")
     # a fixed --noise, --discretization or link flag that would change nothing, as bsst sim's: the link flags in a
     # probe of the searched value (--burst with --over loss_pct is used)
     probe = {args.over: [START[args.over]]} if args.over in LINK_AXES else None

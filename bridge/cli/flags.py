@@ -18,14 +18,47 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from params import likely, path_problem, unreachable
+from params import ConfigError, likely, path_problem, unreachable
 from params.text import number, whole
 
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 
 
 class UsageError(Exception):
-    """Bad command-line input (exit 2)."""
+    """Bad command-line input (exit 2), one line that opens with its command: ``command`` (``bsst``, ``bsst relay``)
+    and ``what`` is wrong, typed (``str()``: ``command: what``), so that a reader (:func:`bridge.cli.main`'s report to
+    a session) never cuts the command off the text."""
+
+    def __init__(self, command: str, what: str) -> None:
+        super().__init__(f"{command}: {what}")
+        self.command, self.what = command, what
+
+    def __reduce__(self) -> tuple[type[UsageError], tuple[str, str]]:
+        return type(self), (self.command, self.what)  # (pickled whole: a process pool's)
+
+
+def as_config_error(exc: UsageError | ConfigError) -> ConfigError:
+    """A refusal as the typed :class:`~params.ConfigError` it is said from (:func:`bridge.cli.main`: ``bsst: `` before
+    it, unless its ``source`` is its command): a usage error's command its ``source`` (``bsst relay``; ``bsst`` alone
+    is the ``bsst: `` every line opens with: no source), its ``what`` the rest."""
+    if isinstance(exc, ConfigError):
+        return exc
+    if exc.command == "bsst":
+        return ConfigError(exc.what, what=exc.what)
+    return ConfigError(str(exc), source=exc.command, what=exc.what)
+
+
+def opens_with_command(exc: ConfigError) -> bool:
+    """Whether a refusal opens with the command it refuses for (its typed ``source``, ``bsst link extract``: a part's
+    own, raised for that command), not with a file or flag (``bsstm.toml: no such file`` was once printed bare)."""
+    words = (exc.source or "").split(" ")
+    return len(words) > 1 and words[0] == "bsst"
+
+
+def refusal_line(exc: ConfigError) -> str:
+    """The one line ``bsst`` says a refusal in (exit 2): ``bsst: `` and it, or it alone when it opens with its
+    command (:func:`opens_with_command`)."""
+    return str(exc) if opens_with_command(exc) else f"bsst: {exc}"
 
 
 FLAG_CUTOFF = 0.75  # difflib's ratio from which a known flag is suggested (--dealy: --delay 0.86; --compensation
@@ -52,7 +85,7 @@ class _Parser(argparse.ArgumentParser):
         self._negative_number_matcher = VALUE_NOT_FLAG
 
     def error(self, message: str) -> NoReturn:  # one line, no usage dump
-        raise UsageError(f"{self.prog}: {message}")
+        raise UsageError(self.prog, message)
 
     def parse_known_args(self, args: Sequence[str] | None = None,  # type: ignore[override]
                          namespace: argparse.Namespace | None = None) -> tuple[argparse.Namespace, list[str]]:
@@ -61,7 +94,7 @@ class _Parser(argparse.ArgumentParser):
         try:
             ns, extras = super().parse_known_args(args, namespace)
         except argparse.ArgumentError as exc:
-            raise UsageError(self.refusal(exc)) from None
+            raise UsageError(*self.refusal(exc)) from None
         if any(a.startswith("-") for a in extras) and not hasattr(ns, UNRECOGNIZED_IN):
             setattr(ns, UNRECOGNIZED_IN, self)
         return ns, extras
@@ -72,23 +105,24 @@ class _Parser(argparse.ArgumentParser):
         ns, extras = self.parse_known_args(args, namespace)
         where = vars(ns).pop(UNRECOGNIZED_IN, self)
         if extras:
-            raise UsageError(f"{where.prog}: unrecognized arguments: {' '.join(extras)}{where.flag_hint(extras)}")
+            raise UsageError(where.prog, f"unrecognized arguments: {' '.join(extras)}{where.flag_hint(extras)}")
         return ns
 
-    def refusal(self, exc: argparse.ArgumentError) -> str:
-        """A bad value's line as bsst's own refusals read: a flag type's words alone (they name the flag: ``bsst:
-        --vehicles must be in [1, 64], got 0``), argparse's own after the flag (``bsst: --at: expected one
-        argument``), or a positional's after its command (``bsst link: ACTION: invalid choice: ...``). Argparse said
-        ``bsst sim: argument --vehicles: --vehicles must be ...`` (until the third wave's fortieth session). Two
-        flags of a mutually exclusive group: ``bsst: --lockstep: not allowed with --realtime: give one of them``."""
+    def refusal(self, exc: argparse.ArgumentError) -> tuple[str, str]:
+        """A bad value's line as bsst's own refusals read, as a UsageError's two parts (the command it opens with, the
+        rest): a flag type's words alone (they name the flag: ``bsst: --vehicles must be in [1, 64], got 0``),
+        argparse's own after the flag (``bsst: --at: expected one argument``), or a positional's after its command
+        (``bsst link: ACTION: invalid choice: ...``). Argparse said ``bsst sim: argument --vehicles: --vehicles must
+        be ...`` (until the third wave's fortieth session). Two flags of a mutually exclusive group: ``bsst:
+        --lockstep: not allowed with --realtime: give one of them``."""
         if isinstance(exc.__context__, argparse.ArgumentTypeError):  # (raised by a type of flags.py, which names it)
-            return f"bsst: {exc.message}"
+            return "bsst", exc.message
         name, message = exc.argument_name, exc.message
         if name is None:
-            return f"{self.prog}: {message}"
+            return self.prog, message
         if message.startswith(CLASH):  # two flags of one group (--realtime --lockstep): named as flags are
             message = f"not allowed with {message.removeprefix(CLASH)}: give one of them"
-        return f"{'bsst' if name.startswith('-') else self.prog}: {name}: {message}"
+        return "bsst" if name.startswith("-") else self.prog, f"{name}: {message}"
 
     def flag_hint(self, extras: Sequence[str]) -> str:
         """``; did you mean --delay?`` for the first unknown flag of ``extras`` close to one of this parser's

@@ -145,13 +145,13 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
             why = burst_problem(side.get("loss_pct", 0.0), side["burst_len"])
             if why:
-                raise UsageError(f"bsst: --burst / --{d}-burst: {why}")
+                raise UsageError("bsst", f"--burst / --{d}-burst: {why}")
         if side.get("trace"):
             from bridge.link.model import trace_clash  # lazy: start-up time
 
             clash = trace_clash(side)
             if clash:
-                raise UsageError(f"bsst: --link-trace / --{d}-link-trace cannot be combined with {clash} (--delay, "
+                raise UsageError("bsst", f"--link-trace / --{d}-link-trace cannot be combined with {clash} (--delay, "
                                  f"--jitter, --loss, --burst) in the {d} direction: the trace gives the delays and "
                                  f"the losses")
     for key in ("compensation", "profile", "shared", *(k for _, k, *_ in GUARD_FLAGS)):
@@ -249,6 +249,6 @@ def radio_of(args: argparse.Namespace) -> tuple[str, int] | None:
     if args.radio:
         return args.radio, args.radio_user or 0
     if args.radio_user is not None:
-        raise UsageError("bsst: --radio-user without --radio: it numbers this side among a fleet's one radio's "
+        raise UsageError("bsst", "--radio-user without --radio: it numbers this side among a fleet's one radio's "
                          "users (bsst sitl --vehicles N --shared-link gives both)")
     return None

@@ -95,9 +95,9 @@ def cmd_link_extract(args: argparse.Namespace) -> int:
 
     src = args.source
     if len(src) not in (1, 2):
-        raise UsageError("bsst link extract: give a run directory, or a vehicle tlog and a controller tlog")
+        raise UsageError("bsst link extract", "give a run directory, or a vehicle tlog and a controller tlog")
     if len(src) == 2 and Path(src[0]).resolve() == Path(src[1]).resolve():
-        raise UsageError(f"bsst link extract: {src[0]} given as both ends: the same file twice")
+        raise UsageError("bsst link extract", f"{src[0]} given as both ends: the same file twice")
     if len(src) == 1:
         check_run_dir(src[0])  # before the --out it would name: what is wrong is the argument given
     read = [Path(src[0]) / f for f in RUN_INPUTS] if len(src) == 1 else src
@@ -163,7 +163,7 @@ def cmd_link_show(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else Path(args.trace).with_suffix(".png")
     if out.suffix.lower() != ".png":
-        raise UsageError(f"bsst link show: --out {out}: the figure is a PNG (name it *.png)")
+        raise UsageError("bsst link show", f"--out {out}: the figure is a PNG (name it *.png)")
     _new_output(out, "--out", args.overwrite, [args.trace])
     tf = read_trace(args.trace)
     print(f"figure: {trace_figure(tf, out)}")
@@ -218,9 +218,9 @@ def cmd_relay(args: argparse.Namespace) -> int:
         target = parse_address(args.to, "--to")
         client = parse_address(args.client, "--client") if args.client else None
     except ValueError as exc:
-        raise UsageError(f"bsst relay: {exc}") from None
+        raise UsageError("bsst relay", str(exc)) from None
     if forwards_to_itself(listen, target):
-        raise UsageError(f"bsst relay: --to {args.to} is the relay's own --listen {args.listen}: it would forward "
+        raise UsageError("bsst relay", f"--to {args.to} is the relay's own --listen {args.listen}: it would forward "
                          "into itself")
     mission = checked_mission(args, args.mission or None)  # read once; a link flag that would change nothing: as
     # bsst sim refuses it. The one path from a mission and its overrides to the parts: the whole mission is checked
@@ -252,7 +252,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
                       radio=radio_of(args))
     except OSError as exc:
         where = f"--listen {args.listen}" + (f" or --back-port {args.back_port}" if args.back_port else "")
-        raise ConfigError(f"{where}: cannot bind ({exc.strerror or exc})") from None
+        raise ConfigError.at(where, None, f"cannot bind ({exc.strerror or exc})") from None
     stop = relay.stop
     old = {s: signal.signal(s, lambda *_: stop()) for s in (signal.SIGINT, signal.SIGTERM)}
     try:

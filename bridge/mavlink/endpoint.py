@@ -151,7 +151,7 @@ class Endpoint:
         except OSError as exc:
             sock.close()
             what = f"--source-port {source_port}" if source_port and address.mode == "udpout" else f"{name} {address}"
-            raise ConfigError(f"{what}: cannot bind ({exc.strerror})") from None
+            raise ConfigError.at(what, None, f"cannot bind ({exc.strerror})") from None
         sock.setblocking(False)
         self.sock = sock
         self.fileno = sock.fileno()

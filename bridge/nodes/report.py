@@ -21,7 +21,11 @@ The kinds, and their fields (times in s of the flight's clock, to the millisecon
   as flown into its directory (:class:`MissionLoaded`: its name, items, the download's figures);
 - ``done``: the controller's outcome (:class:`Done`: ``completed``, ``failsafe``, ``diverged`` or
   ``aborted``; whether the vehicle left lockstep; why it gave up; the mode a ground station took it into; whether
-  it heard nothing from the vehicle at the end).
+  it heard nothing from the vehicle at the end);
+- ``bad_input``: the child's command refused its input, exit 2 (:class:`BadInput`: the refusal, ``text``, and the
+  typed fields of its :class:`params.ConfigError`, ``source``, ``key``, ``what``): written by :func:`bridge.cli.main`
+  beside the line on stderr, which stays the person's (the session raises it again from these fields, never from
+  that line's text).
 
 This module is the one place that reads them: the session never looks inside a report's text.
 """
@@ -35,6 +39,7 @@ from typing import Any
 
 from bridge.autopilot.vehicleevents import Event as VehicleEvent
 from bridge.autopilot.vehicleevents import ParamChanged, Sender, typed_fields
+from params import ConfigError
 
 
 class Kind(StrEnum):
@@ -46,6 +51,7 @@ class Kind(StrEnum):
     STATS = "stats"
     DONE = "done"
     MISSION = "mission"
+    BAD_INPUT = "bad_input"
 
 
 @dataclass(frozen=True)
@@ -173,10 +179,30 @@ class MissionLoaded:
     transfer: dict[str, Any] = field(default_factory=dict)
 
 
-Report = Ready | Event | StatusText | Warning | Refused | Stats | Done | MissionLoaded
+@dataclass(frozen=True)
+class BadInput:
+    """The child's command refused its input (exit 2): the refusal as :class:`params.ConfigError` says it
+    (``text``: its ``str()``, without the ``bsst: `` a person's line opens with) and its typed fields (``source``:
+    what the text opens with, a file, a flag or a command, ``bsst relay``; ``key``; ``what``: the bare reason; None
+    where the refusal did not set them). :meth:`error` is that refusal again, in the session's process."""
+
+    text: str
+    source: str | None = None
+    key: str | None = None
+    what: str | None = None
+
+    @classmethod
+    def of(cls, exc: ConfigError) -> BadInput:
+        return cls(str(exc), exc.source, exc.key, exc.what)
+
+    def error(self) -> ConfigError:
+        return ConfigError(self.text, source=self.source, key=self.key, what=self.what)
+
+
+Report = Ready | Event | StatusText | Warning | Refused | Stats | Done | MissionLoaded | BadInput
 KIND_OF: dict[type, Kind] = {Ready: Kind.READY, Event: Kind.EVENT, StatusText: Kind.STATUSTEXT,
                              Warning: Kind.WARNING, Refused: Kind.REFUSED, Stats: Kind.STATS, Done: Kind.DONE,
-                             MissionLoaded: Kind.MISSION}
+                             MissionLoaded: Kind.MISSION, BadInput: Kind.BAD_INPUT}
 _CLASS_OF = {k: c for c, k in KIND_OF.items()}
 
 
@@ -230,6 +256,9 @@ def _well_typed(report: Report) -> bool:
         return isinstance(report.node, str)
     if isinstance(report, MissionLoaded):
         return isinstance(report.name, str) and isinstance(report.items, int) and isinstance(report.transfer, dict)
+    if isinstance(report, BadInput):
+        return isinstance(report.text, str) and all(v is None or isinstance(v, str)
+                                                    for v in (report.source, report.key, report.what))
     return isinstance(report.text, str)
 
 

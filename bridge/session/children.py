@@ -3,7 +3,8 @@
 In:  a command line for ``python -m bridge`` and a log path; for :func:`instance_slot`, nothing; for
      :func:`hold_instances`, instance numbers
 Out: the child's reports (its stdout, read without blocking, each line parsed by
-     :func:`bridge.nodes.report.parse_line`), its exit, and the last line of its stderr; an instance
+     :func:`bridge.nodes.report.parse_line`; its refusal of its input among them), its exit, and the last line of
+     its stderr (quoted to a person, never read); an instance
      number N (0-9) held exclusively (a ``flock`` on ``<tmp>/bsst-instance-N.lock``)
 
 :func:`instance_slot` holds one of the ten PX4-style instance numbers (ports 14550 + N /
@@ -32,7 +33,7 @@ from bridge.core.locks import Claims, lineage, take_flock
 from bridge.mavlink.address import GCS_PORT, LINK_PORT
 from bridge.nodes.forkserver import ForkedChild, start_child
 from bridge.nodes.process import exit_text
-from bridge.nodes.report import Done, Report, Stats, parse_line
+from bridge.nodes.report import BadInput, Done, Report, Stats, parse_line
 from params import ConfigError
 
 READY_TIMEOUT_S = 30.0  # s for a child to start (Python, imports, bind) on a loaded machine
@@ -171,6 +172,7 @@ class Child:
         self.eof = False
         self.stats: dict[str, Any] = {}  # its last stats report's
         self.done: Done | None = None  # the controller's outcome
+        self.refused: BadInput | None = None  # its command's refusal of its input (exit 2), as it reported it
 
     @property
     def pid(self) -> int:
@@ -201,6 +203,8 @@ class Child:
                 self.stats = report.values
             elif isinstance(report, Done):
                 self.done = report
+            elif isinstance(report, BadInput):
+                self.refused = report
             out.append(report)
         return out
 
@@ -208,7 +212,8 @@ class Child:
         return exit_text(self.proc.returncode)
 
     def last_error(self) -> str:
-        """The last line of the child's stderr (its one-line error, or a traceback's end)."""
+        """The last line of the child's stderr (a traceback's end, or whatever it wrote last), quoted to a person as
+        it is, never read: a refusal is its report (:attr:`refused`)."""
         try:
             lines = [ln for ln in self.log.read_text(errors="replace").splitlines() if ln.strip()]
         except OSError:

@@ -52,7 +52,6 @@ from bridge.session.children import (
 )
 from bridge.session.commands import Commands
 from bridge.session.eventorder import in_cause_order
-from params import ConfigError
 
 
 class Session:
@@ -240,6 +239,7 @@ class Session:
                     return ready
                 if child.eof or child.proc.poll() is not None:
                     child.proc.wait()
+                    self._early += [(child, r) for r in child.reports()]  # what it wrote last: its refusal, if any
                     self._died(child, starting=True)
                 if self.interrupted:
                     raise KeyboardInterrupt
@@ -254,13 +254,14 @@ class Session:
             sel.close()
 
     def _died(self, child: Child, starting: bool = False) -> None:
-        """A child is gone: say so by name; bad input (exit 2) is the user's, anything else ours."""
-        err = child.last_error()
-        if starting and child.proc.returncode == 2:  # the line its bsst printed (across processes, its text is all
-            # there is): "bsst: WHY", or one that opens with its command, "bsst relay: WHY", which stays so (source)
-            said = err.removeprefix("bsst: ")
-            opens = err.partition(": ")[0] if said == err else None
-            raise ConfigError(said or f"{child.name}: bad input", source=opens)
+        """A child is gone: say so by name. Its refusal of its input at its start (its ``bad_input`` report,
+        :attr:`~bridge.session.children.Child.refused`) is the user's: raised again from its typed fields, said as
+        the child said it; anything else is ours, said with the last line of its stderr (quoted, never read: until the
+        third wave's forty-third session a refusal was cut out of that line, and a law's own line at its exit, after
+        the refusal's, was said as the refusal)."""
+        if starting and child.refused is not None:
+            raise child.refused.error()
+        err = child.refused.text if child.refused is not None else child.last_error()
         self.died = child.name
         self._note("died", f"{child.name} (pid {child.pid}) {child.exit_text()}" + (f": {err}" if err else ""),
                    "session")
