@@ -1,4 +1,4 @@
-"""Covers bridge.session.session, bridge.nodes.report and bridge.cli: a refusal that crosses a
+"""Covers bridge.session.session, bridge.nodes.report, bridge.nodes.watched and bridge.cli: a refusal that crosses a
 process boundary travels typed, never as text to be cut.
 
 - A session's child (``bsst vehicle``, ``controller``, ``relay``) refused at its start writes its refusal as a
@@ -10,6 +10,8 @@ process boundary travels typed, never as text to be cut.
 - Each kind of refusal a child can say (a ConfigError; a usage error of its command, ``bsst relay: ...``; one of
   ``bsst`` alone, ``bsst: --radio-user ...``; argparse's) said again from its report is the child's line, to the
   byte.
+- ``bsst sim``'s watched child (a law of the user's own flies in it) sends its refusal back typed too: a usage error's
+  was said after a second ``bsst: ``.
 
 Real processes (``python -m bridge``), a UDP port held by the test.
 """
@@ -113,3 +115,18 @@ def test_a_childs_bad_input_report_says_its_line_again_to_the_byte(case: str) ->
     refusals = [x for x in map(parse_line, r.stdout.splitlines()) if isinstance(x, BadInput)]
     assert len(refusals) == 1, r.stdout
     assert refusal_line(refusals[0].error()) == line
+
+
+def test_a_watched_sims_usage_error_comes_back_typed_said_once(tmp_path: Path) -> None:
+    """``bsst sim --controller mylaw.py:Law --link-trace F --delay 5``: the flight (and the flags' check) runs in a
+    watched child, whose refusal came back to the command's process as text, said after a second ``bsst: ``."""
+    law = tmp_path / "goodbye_law.py"
+    law.write_text(GOODBYE_LAW)
+    trace = tmp_path / "trace.csv"
+    trace.write_text("t_s,delay_ms,lost\n0,10,0\n100,10,0\n")
+    r = run_bsst("sim", "missions/sine.toml", "--controller", f"{law}:Law", "--link-trace", str(trace), "--delay", "5",
+                 "--out", str(tmp_path / "run"), "--no-plots", cwd=ROOT, env=ENV, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.splitlines()[0] == ("bsst: --link-trace / --up-link-trace cannot be combined with delay_ms = 5 "
+                                        "(--delay, --jitter, --loss, --burst) in the up direction: the trace gives "
+                                        "the delays and the losses"), r.stderr

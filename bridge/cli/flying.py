@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from collections.abc import Callable
 from typing import Any
 
 from bridge.cli.flags import (
@@ -21,6 +22,7 @@ from bridge.cli.flags import (
     UsageError,
     _home,
     _ids,
+    as_config_error,
     int_in,
     mission_integer,
     mission_number,
@@ -93,7 +95,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
             return _sim(args, mission)
         # a stop until the fork is said (bsst: interrupted), passed on to the flight from there; once the child has
         # ended, ignored (its result this command's)
-        end = run_watched(lambda: _sim(args, mission), (UsageError, ConfigError), final=True)
+        end = run_watched(lambda: _typed_refusal(lambda: _sim(args, mission)), final=True)
     if end.signalled is not None:  # this command was ended (SIGHUP): its flight with it
         print(f"bsst sim: ended by signal {signal.Signals(end.signalled).name}", file=sys.stderr)
         return 128 + end.signalled
@@ -103,6 +105,17 @@ def cmd_sim(args: argparse.Namespace) -> int:
               "leaves no summary.json; the run directory keeps what was written before", file=sys.stderr)
         return EXIT_FAILED
     return end.status
+
+
+def _typed_refusal(work: Callable[[], int]) -> int:
+    """``work()``, a usage error raised as the typed ConfigError it is said from (flags.as_config_error): a watched
+    child's refusal goes back to this command's process by its fields (until the third wave's forty-third session by
+    its text, said there after a second ``bsst: ``: ``bsst: bsst: --link-trace / --up-link-trace cannot be combined
+    ...``)."""
+    try:
+        return work()
+    except UsageError as exc:
+        raise as_config_error(exc) from None
 
 
 def _sim(args: argparse.Namespace, mission: Any) -> int:

@@ -24,6 +24,7 @@ killed the child with no summary.json. SIGHUP is passed on as it is: the child e
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import sys
@@ -31,7 +32,7 @@ import threading
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from bridge.core.interrupt import as_sigint
 from bridge.nodes.process import exit_text
@@ -104,15 +105,32 @@ def run_watched(work: Callable[[], int], bad_input: tuple[type[BaseException], .
             signal.signal(s, signal.SIG_IGN if final and s == signal.SIGINT else handler)
         os.close(r)
         os.close(asked_w)
-    report = b"".join(chunks).decode("utf-8", "replace")
-    if report.startswith("E"):
-        raise ConfigError(report[1:])
-    if report == "I":
+    ended = _ended(b"".join(chunks))
+    if "bad_input" in ended:  # its refusal again, typed: said as it would have been here (a source "bsst sim" bare)
+        raise ConfigError(**ended["bad_input"])
+    if ended.get("interrupted"):
         raise KeyboardInterrupt
-    if report:
-        return Watched(int(report))
+    if "status" in ended:
+        return Watched(ended["status"])
     code = os.waitstatus_to_exitcode(status)
     return Watched(None, exit_text(code), signalled[0] if signalled else None)
+
+
+def _ended(data: bytes) -> dict[str, Any]:
+    """The child's end as it wrote it (:func:`_child`): ``{"status": N}``, ``{"interrupted": true}`` or ``{"bad_input":
+    {"text", "source", "key", "what"}}`` (``text`` as the message); ``{}`` when it wrote nothing whole (it ended before
+    its work did)."""
+    try:
+        ended = json.loads(data)
+    except ValueError:
+        return {}
+    if not isinstance(ended, dict):
+        return {}
+    if isinstance(ended.get("bad_input"), dict):
+        b = ended["bad_input"]
+        ended["bad_input"] = {"message": str(b.get("text", "")), "source": b.get("source"), "key": b.get("key"),
+                              "what": b.get("what")}
+    return ended
 
 
 def _take_passed_stops(asked: int, mask: set[signal.Signals]) -> None:
@@ -135,18 +153,20 @@ def _take_passed_stops(asked: int, mask: set[signal.Signals]) -> None:
 
 def _child(work: Callable[[], int], bad_input: tuple[type[BaseException], ...], fd: int,
            asked: tuple[int, set[signal.Signals]] | None) -> NoReturn:
-    """The child: the work, then its status (``E`` and its bad input's line, ``I`` for Ctrl-C) to the parent;
-    ``asked``: the pipe of the stops the parent passes on and the signal mask to put back (None: it passes none,
-    this process takes its own)."""
-    report = "1"
+    """The child: the work, then its end to the parent as one JSON object (:func:`_ended`: its status; its bad input,
+    a :class:`~params.ConfigError`'s text and typed fields; or a Ctrl-C); ``asked``: the pipe of the stops the parent
+    passes on and the signal mask to put back (None: it passes none, this process takes its own)."""
+    report: dict[str, Any] = {"status": 1}
     try:
         if asked is not None:
             _take_passed_stops(*asked)
-        report = str(int(work()))
+        report = {"status": int(work())}
     except bad_input as exc:
-        report = f"E{exc}"
+        refused = exc if isinstance(exc, ConfigError) else ConfigError(str(exc))
+        report = {"bad_input": {"text": str(refused), "source": refused.source, "key": refused.key,
+                                "what": refused.what}}
     except KeyboardInterrupt:
-        report = "I"
+        report = {"interrupted": True}
     except BaseException:  # a fault of bsst's own: its traceback, as one process would show it; exit 1
         traceback.print_exc()
     finally:
@@ -155,6 +175,6 @@ def _child(work: Callable[[], int], bad_input: tuple[type[BaseException], ...], 
             sys.stderr.flush()
         except BaseException:  # (a closed stdout: the status stands)
             pass
-        os.write(fd, report.encode())
+        os.write(fd, json.dumps(report).encode())
         os._exit(0)
 
