@@ -20,6 +20,8 @@ import pytest
 
 from bridge.loop import simulate
 from bridge.nodes.report import Done, Ready, parse_line
+from bridge.record.ending import end_not_taken
+from bridge.record.events import RunEvent
 from bridge.record.halves import count_records, read_half
 from bridge.session import instance_slot, sitl
 from missions import MISSION_DIR, load_mission
@@ -270,3 +272,20 @@ def test_a_landing_with_no_auto_disarm_is_as_asked_in_a_session(tmp_path: Path) 
     assert [e["text"] for e in said] == ["the vehicle landed and stays armed, as asked (COM_DISARM_LAND = -1: no "
                                          "auto-disarm)"], s["events"]
     assert said[0]["t"] > landed and not [e for e in s["events"] if e["kind"] == "disarmed"], s["events"]
+
+
+def test_the_end_actions_answer_is_read_from_its_typed_field_never_cut_out_of_its_text() -> None:
+    """``summary.json["end"]["why"]`` of an end action the vehicle never took is the answer its command had, the
+    controller's ``end`` event's ``result`` (bridge.nodes.report.Event), whatever the text says: until the third wave's
+    forty-third session bridge.record.ending cut it out of the text after its last ``): `` ("accepted" without one),
+    so a text reworded for people would have changed the record (both the cases below said ``accepted`` or the text's
+    tail)."""
+    failsafe = RunEvent.at(2.3, "failsafe", "no actuator target for 0.5 s: LAND", "vehicle")
+    for text, result in (("the vehicle did not take the mission's end action, LAND, unanswered", "no answer"),
+                         ("mission over (LAND): the vehicle lands where it is and disarms on the ground", "accepted"),
+                         ("the vehicle did not take the mission's end action (LAND): MAV_RESULT 4", "MAV_RESULT 4")):
+        said = RunEvent.at(2.0, "end", text, "controller", result=result)
+        end = end_not_taken("completed", "land", [said, failsafe], 2.0)
+        assert end is not None and end["why"] == result and end["failsafe_t"] == 2.3, (text, end)
+    told = RunEvent.at(2.0, "end", "the vehicle did not take the mission's end action (LAND): no answer", "controller")
+    assert end_not_taken("completed", "land", [told, failsafe], 2.0) is None  # no answer said: no end action sent

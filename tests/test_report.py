@@ -45,6 +45,7 @@ EVERY_KIND = [
     Done("completed"),
     Done("aborted", True, "vehicle silent for 2 s", silent=True),
     Done("aborted", False, "the vehicle was switched to HOLD: no more targets sent", "HOLD"),
+    Event(2.0, "end", "the vehicle did not take the mission's end action (LAND): no answer", result="no answer"),
     BadInput("--gcs udpin:127.0.0.1:5: cannot bind (Address already in use)", "--gcs udpin:127.0.0.1:5", None,
              "cannot bind (Address already in use)"),
     BadInput("bsst relay: unrecognized arguments: --bogus", "bsst relay", None, "unrecognized arguments: --bogus"),
@@ -84,6 +85,7 @@ def test_event_times_are_reported_to_the_millisecond():
     '{"report": "event", "t": 1.0, "kind": "end", "text": "x", "by": null, "answers": "end"}',
     '{"report": "warning", "text": 5}',
     '{"report": "done", "outcome": "aborted", "silent": 1}',  # a frozen vehicle is killed on it: a bool only
+    '{"report": "event", "t": 1.0, "kind": "end", "text": "x", "by": null, "result": 4}',
     '{"report": "bad_input", "text": 5}',
     '{"report": "bad_input", "text": "x", "source": 1}',
     '{"report": "bad_input"}',

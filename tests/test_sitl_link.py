@@ -208,6 +208,8 @@ def test_an_end_action_lost_in_a_blackout_over_the_end_is_not_flown_as_asked(tmp
         assert end["taken"] and end["disarmed"] and said not in p.stdout + p.stderr and p.returncode == 0, p.stderr
         return
     assert p.returncode == 1 and not end["taken"] and end["why"] == "no answer", (end, p.stderr)
+    answered = [e.get("result") for e in summary["events"] if e["source"] == "controller" and e["kind"] == "end"]
+    assert answered[0] == "no answer", summary["events"]  # the controller's answer, typed (Event.result)
     assert end["failsafe"].startswith("no actuator target") and 2.2 < end["failsafe_t"] < 2.5, end
     vehicle = {e["kind"]: e["t"] for e in summary["events"] if e["source"] == "vehicle"}
     assert end["disarmed"] and end["disarmed_t"] == vehicle["disarmed"] > vehicle["landed"] > end["failsafe_t"]

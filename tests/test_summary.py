@@ -298,7 +298,8 @@ def test_an_end_action_the_vehicle_never_took_is_not_flown_as_asked() -> None:
     closing note says not flown as asked, and the exit status is 1 (until the third wave's fortieth session: no
     ``end``, no note, exit 0). A vehicle that took it (its ``end`` event) leaves none of that."""
     vehicle, controller = ends()
-    lost = RunEvent(4.0, "end", "the vehicle did not take the mission's end action (LAND): no answer", "controller")
+    lost = RunEvent(4.0, "end", "the vehicle did not take the mission's end action (LAND): no answer", "controller",
+                    result="no answer")  # (its command's answer, typed: Event.result)
     after = [RunEvent(1.3, "failsafe", "no actuator target for 0.503 s: level and descend", "vehicle"),
              RunEvent(4.5, "landed", "landing detected", "vehicle"),
              RunEvent(6.5, "disarmed", "landed: disarmed", "vehicle", ITSELF)]
@@ -313,7 +314,8 @@ def test_an_end_action_the_vehicle_never_took_is_not_flown_as_asked() -> None:
     assert [(n.kind, n.text) for n in out.notes][-1] == ("end", note)
     assert not run_ok(s) and all(p["ok"] for p in s["policies"])
     took = [RunEvent(1.0, "end", "mission over: LAND at x=0 y=1 m from z=1 m, 0.7 m/s", "vehicle"),
-            RunEvent(1.0, "end", "mission over: the vehicle lands where it is and disarms on the ground", "controller")]
+            RunEvent(1.0, "end", "mission over: the vehicle lands where it is and disarms on the ground", "controller",
+                     result="accepted")]
     out = session_summary(FLIGHT, facts(clock="realtime"), joined(), [ARMED, *took], vehicle, controller)
     assert "end" not in out.summary and [n.kind for n in out.notes] == ["ended"] and run_ok(out.summary)
     # the link back at 2.8 s, after the vehicle's failsafe: it takes the LAND as a mode the controller selected, late:

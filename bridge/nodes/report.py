@@ -101,7 +101,9 @@ class Event:
     event's change, ``param``; a mode event's ``mode`` and ``armed``; an arm's ``pre_start``). ``answers``: a
     controller's event said in answer to the vehicle's own events of these kinds (its arming, its end action, its
     crash): the session never puts it before its cause, whatever the two clocks say
-    (:meth:`bridge.session.session.Session._handle`)."""
+    (:meth:`bridge.session.session.Session._handle`). ``result``: the controller's ``end`` event that says how the
+    vehicle answered its end-action command, that answer (``accepted``, ``no answer``, ``MAV_RESULT 4``:
+    :func:`bridge.record.ending.end_not_taken` reads it); None on every other event."""
 
     t: float
     kind: str
@@ -112,6 +114,7 @@ class Event:
     armed: bool | None = None
     pre_start: bool | None = None
     answers: tuple[str, ...] | None = None
+    result: str | None = None
 
     @classmethod
     def at(cls, t: float, kind: str, text: str, by: Sender | None = None, **fields: Any) -> Event:
@@ -243,6 +246,7 @@ def _well_typed(report: Report) -> bool:
                 and (report.mode is None or isinstance(report.mode, str))
                 and (report.armed is None or isinstance(report.armed, bool))
                 and (report.pre_start is None or isinstance(report.pre_start, bool))
+                and (report.result is None or isinstance(report.result, str))
                 and (report.answers is None or (isinstance(report.answers, tuple)
                                                 and all(isinstance(k, str) for k in report.answers))))
     if isinstance(report, Stats):

@@ -2,7 +2,8 @@
 
 In:  the action (``land`` or ``hold``); the rows the vehicle flew under it, after the mission's last step (t s on
      the vehicle's clock, z m and vz m/s of the true state at the start of each control period); its events
-     after the mission (t s, kind: ``end``, ``landed``, ``disarmed``, ``failsafe``; their text)
+     after the mission (t s, kind: ``end``, ``landed``, ``disarmed``, ``failsafe``; their text); the controller's
+     ``end`` event's ``result``, its end-action command's answer
 Out: :func:`end_block`, ``summary.json["end"]``: ``action``; ``rows``; ``disarmed`` (the landing ended in a
      disarm on the ground); ``landing_s`` (the ``end`` event to the disarm, s: the touchdown and COM_DISARM_LAND
      after it); ``disarm_z_m`` (the last row before the disarm) and ``touchdown_vz_mps`` (the last row before the
@@ -72,15 +73,15 @@ def end_not_taken(outcome: str, action: str, events: Sequence[RunEvent], end_s: 
     if outcome != "completed":
         return None
     ev = in_time_order([e for e in vehicle_events(events) if e.t >= end_s - EPS_S])
-    said = next((e.text for e in events if e.kind == "end" and e.source == "controller"), None)
+    # its command's answer, typed (RunEvent.result: "accepted", "no answer", "MAV_RESULT 4"), never cut out of its text
+    why = next((e.result for e in events if e.kind == "end" and e.source == "controller" and e.result), None)
     fs = next((e for e in ev if e.kind == "failsafe"), None)
     mode = next((e for e in ev if e.kind == "mode" and e.by is not None and e.by.link == "controller"), None)
     # taken: its own end, or a mode by the controller before any failsafe; one after it is the failsafe's landing
     # finished by the command retried through a link back: the failsafe took over first (until the third wave's
     # forty-second session that read as taken: no ``end``, exit 0)
-    if said is None or any(e.kind == "end" for e in ev) or (mode is not None and (fs is None or mode.t < fs.t)):
+    if why is None or any(e.kind == "end" for e in ev) or (mode is not None and (fs is None or mode.t < fs.t)):
         return None
-    why = said.rpartition("): ")[2] if "): " in said else "accepted"  # its answer: "no answer", "MAV_RESULT 4"
     down = next((e for e in ev if e.kind == "disarmed" and (fs is None or e.t >= fs.t)), None)
     return end_not_taken_block(action, why, None if fs is None else fs.text, None if fs is None else fs.t,
                                None if mode is None else mode.t, None if down is None else down.t)

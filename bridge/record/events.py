@@ -38,6 +38,7 @@ class RunEvent:
     mode: str | None = None
     armed: bool | None = None
     pre_start: bool | None = None
+    result: str | None = None  # a controller's ``end`` event's: its end-action command's answer (Event.result)
 
     @classmethod
     def at(cls, t: float, kind: str, text: str, source: str | None = None, by: Sender | None = None,
@@ -63,6 +64,8 @@ class RunEvent:
             d["source"] = self.source
         d.update((k, v.as_dict() if isinstance(v, ParamChanged) else v)
                  for k, v in typed_fields(self).items() if v is not None)
+        if self.result is not None:
+            d["result"] = self.result
         return d
 
     @classmethod
@@ -73,7 +76,7 @@ class RunEvent:
         return cls(d.get("t"), d["kind"], d.get("text", ""), d.get("source"),
                    Sender.from_dict(by) if isinstance(by, Mapping) else None,
                    ParamChanged.from_dict(param) if isinstance(param, Mapping) else None,
-                   mode=d.get("mode"), armed=d.get("armed"), pre_start=d.get("pre_start"))
+                   mode=d.get("mode"), armed=d.get("armed"), pre_start=d.get("pre_start"), result=d.get("result"))
 
 
 def split_at_start(events: Iterable[RunEvent]) -> tuple[list[RunEvent], list[RunEvent]]:

@@ -402,7 +402,7 @@ class Session:
                 self.vehicle_armed = False
             elif kind == "diverged":
                 self.diverged = True
-        self._note(kind, report.text, child.name, t, report.by, **typed_fields(report))
+        self._note(kind, report.text, child.name, t, report.by, result=report.result, **typed_fields(report))
 
     def _learn_origin(self) -> None:
         """The mission's clock (the trace's, the controller's) as soon as a join finds its time 0, the vehicle's step

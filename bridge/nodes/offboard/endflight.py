@@ -57,12 +57,13 @@ class EndFlying(RealtimeFlying):
             why = "no answer" if result is None else f"MAV_RESULT {result}"
             self.reason = f"the vehicle did not take the mission's end action ({'HOLD' if hold else 'LAND'}): {why}"
             self.end_unanswered = end_unanswered(self.flight.mission.end_action, why, time.monotonic() - self._last_rx)
-            self.event("end", self.reason)
+            self.event("end", self.reason, result=why)
             return "completed"
         taken_t = self.t_mission  # when its answer came, on the mission's clock
         stays = "stays armed (COM_DISARM_LAND <= 0)" if self.flight.params.land_disarm_s <= 0.0 else "disarms"
         self.event("end", "mission over: the vehicle holds its position" if hold else
-                   f"mission over: the vehicle lands where it is and {stays} on the ground", answers=("end",))
+                   f"mission over: the vehicle lands where it is and {stays} on the ground", answers=("end",),
+                   result="accepted")
         if not hold and not self._await_landing():
             if self.stopping and not self.reason:  # (a stop: _await_landing says no other reason)
                 self.reason = "interrupted (Ctrl-C or SIGTERM) in the mission's end landing: the vehicle still armed"

@@ -146,10 +146,12 @@ class OffboardLink:
         self.param_sets: list[ScheduledSet] = []  # the scheduled PARAM_SETs sent, in order
         self._pending_params: dict[str, ScheduledSet] = {}  # by name: sent, not echoed by the vehicle yet
 
-    def event(self, kind: str, text: str, answers: tuple[str, ...] | None = None, t: float | None = None) -> None:
+    def event(self, kind: str, text: str, answers: tuple[str, ...] | None = None, t: float | None = None,
+              result: str | None = None) -> None:
         """Report an event at the mission time (``t``: at that one instead, s; NaN: not known); ``answers``: the
-        vehicle's own event kinds it answers (:class:`bridge.nodes.report.Event`)."""
-        self._status(Event.at(self.t_mission if t is None else t, kind, text, answers=answers))
+        vehicle's own event kinds it answers, ``result``: the answer a command it says had
+        (:class:`bridge.nodes.report.Event`)."""
+        self._status(Event.at(self.t_mission if t is None else t, kind, text, answers=answers, result=result))
 
     def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1,
                  p3: float = 0.0, settled: Callable[[], bool] | None = None) -> int | None:
