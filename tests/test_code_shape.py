@@ -110,6 +110,39 @@ def text_read_problems(path: str, tree: ast.Module) -> list[str]:
     return out
 
 
+SAID = {"text", "reason", "how", "why"}  # what a report, an event or a child says for people (bridge.nodes.report)
+
+
+def _says(node: ast.AST) -> bool:
+    """Whether ``node`` holds words said for people: an attribute of :data:`SAID` (``e.text``, ``done.reason``), or a
+    child's last stderr line (``child.last_error()``)."""
+    return any(isinstance(n, ast.Attribute) and n.attr in SAID
+               or isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute) and n.func.attr == "last_error"
+               for n in ast.walk(node))
+
+
+def words_read_problems(path: str, tree: ast.Module) -> list[str]:
+    """A line per place where a function reads words said for people (:func:`_says`, directly or through a name it
+    assigned them to) with :data:`TEXT_READS` or ``in``: across a process or an event's boundary, read the typed
+    fields (a ``bad_input`` report's, an event's ``result``) instead."""
+    out = []
+    for fn in ast.walk(tree):
+        if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        held = {t.id for n in ast.walk(fn) if isinstance(n, ast.Assign) and _says(n.value)
+                for t in n.targets if isinstance(t, ast.Name)}
+
+        def read(node: ast.AST) -> bool:
+            return node.id in held if isinstance(node, ast.Name) else _says(node)  # noqa: B023  (called at once)
+
+        for node in ast.walk(fn):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in TEXT_READS \
+                    and read(node.func.value) or isinstance(node, ast.Compare) \
+                    and isinstance(node.ops[0], (ast.In, ast.NotIn)) and read(node.comparators[0]):
+                out.append(f"{path}:{node.lineno}: reads words said for people: read the typed fields instead")
+    return out
+
+
 def has_ports(doc: str) -> bool:
     """Whether a docstring has a ports block: a line starting ``In:`` and ``Out:`` on it or after it."""
     lines = [line.strip() for line in doc.splitlines()]
@@ -193,6 +226,20 @@ def test_no_refusal_is_reworded_by_matching_its_own_text() -> None:
     bad = ast.parse('try:\n    f()\nexcept ValueError as exc:\n    if str(exc).startswith("m.toml: "):\n        raise\n'
                     'except KeyError as e:\n    g("limit" in str(e), e.args[0].replace("a", "b"))\n')
     assert [p.split(": ")[0] for p in text_read_problems("x/m.py", bad)] == ["x/m.py:4", "x/m.py:7", "x/m.py:7"]
+
+
+def test_no_report_or_event_is_read_by_its_words() -> None:
+    """Until the third wave's forty-third session the session cut ``bsst: `` off a child's last stderr line to say why
+    it refused (a law's own goodbye at its exit was said instead), and bridge.record.ending cut the end action's answer
+    out of the controller's ``end`` event's text after its last ``): ``; both now read typed fields (the ``bad_input``
+    report, the event's ``result``). No module of ``bridge/`` reads such words again."""
+    found = [p for f in sorted((ROOT / "bridge").rglob("*.py"))
+             for p in words_read_problems(f.relative_to(ROOT).as_posix(), ast.parse(f.read_text()))]
+    assert not found, "\n".join(found)
+    bad = ast.parse("def f(child, events):\n    err = child.last_error()\n    said = err.removeprefix('bsst: ')\n"
+                    "    why = next(e.text for e in events).rpartition('): ')[2]\n"
+                    "    return 'gave up' in child.done.reason, said\n")
+    assert [p.split(": ")[0] for p in words_read_problems("x/m.py", bad)] == ["x/m.py:3", "x/m.py:4", "x/m.py:5"]
 
 
 @pytest.mark.parametrize("source, rule", [
