@@ -10,10 +10,12 @@ import re
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from bridge import simulate
 from bridge.core.flight import prepare
+from bridge.record.metrics import gps_outages
 from missions import load_mission
 from params import ConfigError
 from plant import Quadrotor, load_profile
@@ -377,8 +379,24 @@ def test_gps_outage_drifts_and_is_reported() -> None:
         assert o["off_s"] == 10.0 and o["on_s"] == on
         assert 0.2 < o["drift_max_m"] < 5.0 and o["drift_at_end_m"] <= o["drift_max_m"]
         assert 0.0 < o["nees_mean_after"] < 20.0 and 0.0 < o["drift_rms_after_m"] < o["drift_max_m"]
-        kinds = [(e["t"], e["text"]) for e in run.summary["events"] if e["kind"] == "fault"]
-        assert kinds == [(10.0, "gps off"), (on, "gps on")]
+        kinds = [(e["t"], e["text"], e.get("gps")) for e in run.summary["events"] if e["kind"] == "fault"]
+        assert kinds == [(10.0, "gps off", False), (on, "gps on", True)]  # the words for people, the field for programs
+
+
+def test_gps_outages_are_told_by_the_fault_events_typed_gps_not_by_their_words() -> None:
+    """``summary.json["gps_outages"]`` reads each fault event's ``gps`` (the GPS it leaves on or off: the vehicle's
+    typed field, as it travels from a session's vehicle process), never its text: until the third wave's forty-third
+    session it matched the text ``gps off`` / ``gps on``, and an outage said in other words (or with its sender's
+    ``[by ...]``, as summary.json shows a ground station's injection) was no outage."""
+    t = np.arange(0.0, 10.0, 0.5)
+    drift = np.where((t >= 2.0) & (t <= 4.0), 0.5, 0.0)
+    trace = {"t": t, "x": drift, **{a: np.zeros_like(t) for a in ("y", "z", "x_est", "y_est", "z_est")},
+             "nees": np.full_like(t, 3.0)}
+    events = [{"t": 1.0, "kind": "fault", "text": "motor 1: off"},
+              {"t": 2.0, "kind": "fault", "text": "gps off [by 255:190 127.0.0.1:14550 gcs]", "gps": False},
+              {"t": 4.0, "kind": "fault", "text": "GPS back", "gps": True}]
+    (o,) = gps_outages(trace, events)
+    assert (o["off_s"], o["on_s"], o["drift_max_m"], o["nees_mean_after"]) == (2.0, 4.0, 0.5, 3.0), o
 
 
 def test_a_rotor_at_75_percent_needs_attitude_gains_sized_for_its_torque_step() -> None:

@@ -37,6 +37,7 @@ EVERY_KIND = [
     Event(1.25, "armed", "armed, offboard control", Sender(200, 191, "127.0.0.1", 40000, "controller")),
     Event(3.0, "disarmed", "landed: disarmed", ITSELF),
     Event(0.5, "connected", "vehicle sysid 1 compid 1"),
+    Event(10.0, "fault", "gps off", GCS, gps=False),
     Event(5.328, "failsafe", "the vehicle's flight ended", answers=("crashed", "diverged", "collision")),
     StatusText(2, "lockstep: left (no answer)"),
     Warning("rejected 3: sender 2, crc 1"),
@@ -87,6 +88,7 @@ def test_event_times_are_reported_to_the_millisecond():
     '{"report": "done", "outcome": "aborted", "silent": 1}',  # a frozen vehicle is killed on it: a bool only
     '{"report": "event", "t": 1.0, "kind": "end", "text": "x", "by": null, "result": 4}',
     '{"report": "bad_input", "text": 5}',
+    '{"report": "event", "t": 1.0, "kind": "fault", "text": "gps off", "by": null, "gps": "off"}',
     '{"report": "bad_input", "text": "x", "source": 1}',
     '{"report": "bad_input"}',
     "relay: listening on 127.0.0.1:5",  # a person's line, not a report

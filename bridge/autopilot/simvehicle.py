@@ -393,7 +393,8 @@ class SimVehicle:
         """Act on one event of the timeline now (:func:`~bridge.autopilot.timeline.act_on`); an event says it
         (``fault``, ``wind`` for the weather's, ``link``), naming ``by`` (a ground station's injection; None: the
         mission's timeline)."""
-        self.event(act_on(e, self.plant, self.sensors), e.text()).by = by
+        gps = e.get("state") == "on" if e.kind == "gps" and e.get("state") is not None else None
+        self.event(act_on(e, self.plant, self.sensors), e.text(), gps=gps).by = by
 
     def plant_verdict(self) -> str | None:
         """After a control period: ``diverged`` or ``crashed`` when the plant ends the flight now (its event

@@ -63,7 +63,7 @@ class Sender:
 VEHICLE_LINK = "vehicle"
 CONTROLLER_LINK = "controller"  # the link of a sender on the vehicle's own link (its controller's); else "gcs"
 ITSELF = Sender(None, None, None, None, VEHICLE_LINK)  # the vehicle's own decision
-TYPED_FIELDS = ("param", "mode", "armed", "pre_start")  # an event's typed fields (:class:`Event`), as it travels
+TYPED_FIELDS = ("param", "mode", "armed", "pre_start", "gps")  # an event's typed fields (:class:`Event`), as it travels
 
 
 def typed_fields(event: Any) -> dict[str, Any]:
@@ -99,7 +99,9 @@ class Event:
     name, old and new value); a ``mode`` event's ``mode`` (the mode it is in after, or will arm in)
     and ``armed`` (it acted on an armed vehicle now; False: a selection for the next arm); an ``armed`` or
     ``disarmed`` event's ``pre_start`` (True: a ground station's arm in HOLD on the ground, awaiting a
-    mission's start, or the vehicle's disarm when none came: nothing flown, part of the start, docs/missions.md)."""
+    mission's start, or the vehicle's disarm when none came: nothing flown, part of the start, docs/missions.md); a
+    ``fault`` event's ``gps`` (the GPS it leaves on, True, or off, False: a ``gps`` event's ``state``; None for any
+    other fault: :func:`bridge.record.metrics.gps_outages` reads it)."""
 
     t: float
     kind: str
@@ -109,6 +111,7 @@ class Event:
     mode: str | None = None
     armed: bool | None = None
     pre_start: bool | None = None
+    gps: bool | None = None
 
     @property
     def shown(self) -> str:

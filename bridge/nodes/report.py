@@ -98,7 +98,8 @@ class Ready:
 class Event:
     """An event at ``t`` (s, to the millisecond: :meth:`at`) of ``kind``, its ``text``, who caused it, and
     the typed fields of the vehicle's events (:class:`bridge.autopilot.vehicleevents.Event`: a parameter
-    event's change, ``param``; a mode event's ``mode`` and ``armed``; an arm's ``pre_start``). ``answers``: a
+    event's change, ``param``; a mode event's ``mode`` and ``armed``; an arm's ``pre_start``; a fault's ``gps``).
+    ``answers``: a
     controller's event said in answer to the vehicle's own events of these kinds (its arming, its end action, its
     crash): the session never puts it before its cause, whatever the two clocks say
     (:meth:`bridge.session.session.Session._handle`). ``result``: the controller's ``end`` event that says how the
@@ -113,6 +114,7 @@ class Event:
     mode: str | None = None
     armed: bool | None = None
     pre_start: bool | None = None
+    gps: bool | None = None
     answers: tuple[str, ...] | None = None
     result: str | None = None
 
@@ -246,6 +248,7 @@ def _well_typed(report: Report) -> bool:
                 and (report.mode is None or isinstance(report.mode, str))
                 and (report.armed is None or isinstance(report.armed, bool))
                 and (report.pre_start is None or isinstance(report.pre_start, bool))
+                and (report.gps is None or isinstance(report.gps, bool))
                 and (report.result is None or isinstance(report.result, str))
                 and (report.answers is None or (isinstance(report.answers, tuple)
                                                 and all(isinstance(k, str) for k in report.answers))))

@@ -6,7 +6,7 @@ In:  an event's time (s, the flight's clock: negative before its time 0), kind, 
      (``param``, a :class:`~bridge.autopilot.vehicleevents.ParamChanged`: name, old and new value, or None)
 Out: :class:`RunEvent`; its dict for ``summary.json["events"]`` (:meth:`RunEvent.as_dict`: ``t`` s rounded
      to 1 us or null, ``kind``, ``text`` with the sender shown as `` [by ...]``, ``source`` when there is one,
-     ``param`` (``{name, old, new}``), ``mode``, ``armed`` and ``pre_start`` when the event has them);
+     ``param`` (``{name, old, new}``), ``mode``, ``armed``, ``pre_start`` and ``gps`` when the event has them);
      whether it came before the mission's time 0 (:attr:`RunEvent.before_start`); a run's events split there, into
      the mission's and those before it (:func:`split_at_start`: the one place a run's readers are told which is
      which); :func:`in_time_order`: events as recorded, in the order of their times
@@ -38,6 +38,7 @@ class RunEvent:
     mode: str | None = None
     armed: bool | None = None
     pre_start: bool | None = None
+    gps: bool | None = None  # a fault event's: the GPS it leaves on or off (a gps event's state)
     result: str | None = None  # a controller's ``end`` event's: its end-action command's answer (Event.result)
 
     @classmethod
@@ -76,7 +77,8 @@ class RunEvent:
         return cls(d.get("t"), d["kind"], d.get("text", ""), d.get("source"),
                    Sender.from_dict(by) if isinstance(by, Mapping) else None,
                    ParamChanged.from_dict(param) if isinstance(param, Mapping) else None,
-                   mode=d.get("mode"), armed=d.get("armed"), pre_start=d.get("pre_start"), result=d.get("result"))
+                   mode=d.get("mode"), armed=d.get("armed"), pre_start=d.get("pre_start"), gps=d.get("gps"),
+                   result=d.get("result"))
 
 
 def split_at_start(events: Iterable[RunEvent]) -> tuple[list[RunEvent], list[RunEvent]]:

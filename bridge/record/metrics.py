@@ -95,25 +95,26 @@ def plant_blocks(plant: Any) -> dict[str, Any]:
 
 
 def gps_outages(trace: Mapping[str, np.ndarray], events: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Each GPS outage of the timeline (``fault`` events ``gps off`` .. ``gps on``, or to the end): the
-    estimate's 3-D position drift (m, truth − estimate) during it, at its max and at its end, and the mean NEES
-    after it (to the next outage or the end; 9 degrees of freedom), from the trace arrays."""
+    """Each GPS outage of the timeline (``fault`` events ``gps off`` .. ``gps on``, told by their typed ``gps``, or to
+    the end): the estimate's 3-D position drift (m, truth − estimate) during it, at its max and at its end, and the
+    mean NEES after it (to the next outage or the end; 9 degrees of freedom), from the trace arrays."""
     if "x_est" not in trace:
         return []
     t = trace["t"]
     err = np.sqrt(sum((trace[a] - trace[a + "_est"]) ** 2 for a in ("x", "y", "z")))
-    marks = [(e["t"], e["text"]) for e in events if e["kind"] == "fault" and e["text"] in ("gps off", "gps on")]
+    # (the GPS each fault leaves on or off: its typed field, never its text)
+    marks = [(e["t"], e["gps"]) for e in events if e["kind"] == "fault" and isinstance(e.get("gps"), bool)]
     out = []
-    for i, (t_off, text) in enumerate(marks):
-        if text != "gps off":
+    for i, (t_off, on) in enumerate(marks):
+        if on:
             continue
-        t_on = next((tm for tm, tx in marks[i + 1:] if tx == "gps on"), None)
+        t_on = next((tm for tm, now in marks[i + 1:] if now), None)
         during = (t >= t_off) & (t <= (t[-1] if t_on is None else t_on))
         row: dict[str, Any] = {"off_s": t_off, "on_s": t_on,
                                "drift_max_m": float(err[during].max()) if during.any() else None,
                                "drift_at_end_m": float(err[during][-1]) if during.any() else None}
         if t_on is not None:
-            t_next = next((tm for tm, tx in marks[i + 1:] if tx == "gps off" and tm > t_on), t[-1] + 1.0)
+            t_next = next((tm for tm, now in marks[i + 1:] if not now and tm > t_on), t[-1] + 1.0)
             after = (t >= t_on) & (t < t_next) & np.isfinite(trace["nees"])
             row["nees_mean_after"] = float(trace["nees"][after].mean()) if after.any() else None
             row["drift_rms_after_m"] = float(np.sqrt(np.mean(err[(t >= t_on) & (t < t_next)] ** 2)))
