@@ -49,7 +49,7 @@ from bridge.sweep.cells import (
     seeds_alike,
 )
 from bridge.sweep.classes import CLASSES, Classes, classify, thresholds_text
-from bridge.sweep.grid import AXES, LINK_AXES, NAME_AXES, NO_SCHEME, SHORT, grid_size
+from bridge.sweep.grid import AXES, FLEET_FORMATION, LINK_AXES, NAME_AXES, NO_SCHEME, SHORT, grid_size
 from controller.law import discretization_problem
 from params import ConfigError, unreachable
 from plant.wind import TURBULENCE
@@ -318,7 +318,7 @@ def write_report(path: Path, rows: Sequence[Mapping[str, Any]], meta: Mapping[st
     if rows:  # (none: a sweep of no cells, or a report of an empty cells.csv)
         lines += ["", "## Reproducing a row", "",
                   "Each row of `cells.csv` is one offline flight of `mission.toml` (in this directory); for example "
-                  "the first one:", "", "```sh", reproduce(rows[0], swept), "```", ""]
+                  "the first one:", "", "```sh", reproduce(rows[0], swept, mission_wind_from(meta)), "```", ""]
     out = path / REPORT_MD
     tmp = path / REPORT_TMP
     tmp.write_text("\n".join(lines), encoding="utf-8")
@@ -363,17 +363,32 @@ def jitter_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     return lines
 
 
-def reproduce(row: Mapping[str, Any], swept: Sequence[str]) -> str:
+def reproduce(row: Mapping[str, Any], swept: Sequence[str], wind_from_deg: float = 0.0) -> str:
     """The ``bsst sim`` command that flies one row again (a ``truth`` row without ``--noise``: it flies the same
     at any scale, and ``bsst sim`` refuses a noise that changes nothing; a row of a law without a super-twisting
-    step without ``--discretization``, refused for the same reason)."""
+    step without ``--discretization``, refused for the same reason). A swept wind keeps the mission's direction
+    (``wind_from_deg``, its ``[wind] from_deg``: ``--wind S`` alone would blow from the north); a fleet's row is
+    its size in the sweep's formation."""
     flags = [f"--controller {row['controller']}", f"--rate {row['rate_hz']:g}"]
     flags += [f"--{SHORT[a]} {row[a]:g}" for a in LINK_AXES if a in swept]
     flags += [f"--estimator {row['estimator']}"] if "estimator" in swept else []
     flags += [f"--noise {row['noise']:g}"] if "noise" in swept and row["estimator"] != "truth" else []
+    flags += [f"--wind {row['wind_mps']:g}:{wind_from_deg:g}"] if "wind_mps" in swept else []
+    flags += [f"--turbulence {row['turbulence']}"] if "turbulence" in swept else []
     flags += [f"--discretization {row['discretization']}"] if "discretization" in swept \
         and discretization_problem((row["controller"],)) is None else []  # bsst sim refuses it for smc, pid
+    flags += [f"--vehicles {row['vehicles']} --formation {FLEET_FORMATION}"] if "vehicles" in swept \
+        and row["vehicles"] > 1 else []  # (one vehicle: the mission alone, as its cell flew)
     return f"bsst sim mission.toml {' '.join(flags)} --seed {row['seed']}"
+
+
+def mission_wind_from(meta: Mapping[str, Any]) -> float:
+    """The compass direction (deg) a sweep's mission's steady wind blows from (its ``[wind] from_deg``; 0, the
+    north, without one), which a swept wind speed keeps (bridge.sweep.grid)."""
+    mission = meta.get("mission") if isinstance(meta.get("mission"), Mapping) else {}
+    wind = mission.get("wind")
+    frm = wind.get("from_deg", 0.0) if isinstance(wind, Mapping) else 0.0
+    return float(frm) if isinstance(frm, (int, float)) and not isinstance(frm, bool) else 0.0
 
 
 def sensor_set(meta: Mapping[str, Any]) -> str:
