@@ -159,6 +159,23 @@ def test_a_bad_run_directory_is_named_as_given_not_as_the_out_it_would_make(tmp_
         assert "--out" not in err and not (tmp_path / "link-trace.csv").exists()
 
 
+def test_a_fleets_run_directory_names_its_vehicles_directories_to_extract_from(tmp_path: Path) -> None:
+    """A real-time fleet's run directory holds each vehicle's link in its ``vehicle-<id>/`` (docs/swarm.md): the
+    command names them, and the one it names extracts (it said only "neither vehicle.tlog and controller.tlog nor
+    vehicle.bin and controller.bin: no record of a link to extract", a tour's ``bsst link extract`` of
+    ``bsst sitl --vehicles 2 --shared-link --realtime``'s directory)."""
+    (tmp_path / "summary.json").write_text('{"clock": "realtime"}\n')
+    for i in (2, 10, 1):
+        (tmp_path / f"vehicle-{i}").mkdir()
+        for side, log in zip(("vehicle", "controller"), our_link(100), strict=True):
+            (tmp_path / f"vehicle-{i}" / f"{side}.tlog").write_bytes(log)
+    err = refused(bsst("link", "extract", tmp_path))
+    assert err == (f"bsst: {tmp_path}: a fleet's run directory: each vehicle's link is in its own (vehicle-1, "
+                   f"vehicle-2, vehicle-10); extract each, as bsst link extract {tmp_path / 'vehicle-1'}"), err
+    assert bsst("link", "extract", tmp_path / "vehicle-1").returncode == 0
+    assert (tmp_path / "vehicle-1" / "link-trace.csv").is_file() and not (tmp_path / "link-trace.csv").exists()
+
+
 def test_an_out_that_is_the_commands_own_input_is_refused_even_with_overwrite(tmp_path: Path) -> None:
     """``--overwrite`` lets extract, fit and show replace an old output, never the file they read."""
     v, c = our_link(300)

@@ -283,8 +283,19 @@ def extract_run_dir(path: str | Path, clock: str = "same") -> Extraction:
             raise ConfigError(f"--clock {clock}: {p} has no tlogs; its trace halves are on one host's monotonic "
                               f"clock")
         return extract_halves(vh, ch)
+    fleet = fleet_vehicle_dirs(p)
+    if fleet:  # a fleet's run (bsst sitl --vehicles N --realtime): a link per vehicle, each in its own directory
+        raise ConfigError(f"{p}: a fleet's run directory: each vehicle's link is in its own ({', '.join(fleet)}); "
+                          f"extract each, as bsst link extract {p / fleet[0]}")
     raise ConfigError(f"{p}: neither vehicle.tlog and controller.tlog nor vehicle.bin and controller.bin: "
                       f"no record of a link to extract")
+
+
+def fleet_vehicle_dirs(path: Path) -> list[str]:
+    """The ``vehicle-<id>`` directories of a fleet's run directory (docs/swarm.md, "The run directory"), by id; none
+    in another directory."""
+    found = [d.name for d in path.glob("vehicle-*") if d.is_dir() and d.name[len("vehicle-"):].isdigit()]
+    return sorted(found, key=lambda name: int(name[len("vehicle-"):]))
 
 
 def step_records(path: Path) -> tuple[DirectionRecords, DirectionRecords] | None:
