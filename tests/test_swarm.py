@@ -83,6 +83,14 @@ def test_one_vehicle_flies_through_bridge_simulate_exactly_as_before(tmp_path: P
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes()
 
 
+def test_a_fleet_of_one_is_printed_as_one_vehicle(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``bsst sim MISSION --vehicles 1`` heads its summary ``1 vehicle``, not ``1 vehicles`` (a tour)."""
+    assert main(["sim", str(short_sine(tmp_path, 0.2)), "--vehicles", "1", "--out", str(tmp_path / "r"),
+                 "--no-plots"]) == 0
+    head = capsys.readouterr().out.splitlines()[0]
+    assert head.startswith("mission sine  1 vehicle  clock offline"), head
+
+
 def test_paths_closer_than_the_minimum_break_the_separation_policy_and_exit_1(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["sim", str(NEAR_MISS), "--out", str(tmp_path / "r"), "--no-plots"]) == 1

@@ -40,7 +40,8 @@ def report_fleet(run: Any, command: str) -> int:
     s = run.summary
     try:
         w = sys.stdout.write
-        w(f"mission {s['mission']}  {len(s['vehicles'])} vehicles  clock {s['clock']}  rate {s['rate_hz']:g} Hz  "
+        n = len(s["vehicles"])
+        w(f"mission {s['mission']}  {n} vehicle{'' if n == 1 else 's'}  clock {s['clock']}  rate {s['rate_hz']:g} Hz  "
           f"duration {duration_text(s)}\noutcome: {s['outcome']}\n")
         for v, r in zip(s["vehicles"], run.runs, strict=True):
             rms = "n/a" if v["rms_3d"] is None else f"{v['rms_3d']:.3e} m"
