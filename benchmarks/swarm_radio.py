@@ -50,6 +50,17 @@ def fitting_rate(n: int, up_bps: float, down_bps: float, command_bytes: int) -> 
     return min(down_bps / (n * FRAME_BYTES["ODOMETRY"]), up_bps / (n * command_bytes))
 
 
+def ended_s(summary: dict[str, Any], trace_end_s: float) -> float:
+    """When a vehicle's flight ended as its outcome says (s): a failsafe's first failsafe event (its trace goes on to
+    the mission's end, the failsafe's descent flown: the trace's end said "failsafe at 30.00 s" of one at 0.52 s),
+    else the trace's end (a divergence, a crash: the plant ended it there)."""
+    if summary["outcome"] == "failsafe":
+        times = [e["t"] for e in summary.get("events", []) if e.get("kind") == "failsafe"]
+        if times:
+            return float(times[0])
+    return trace_end_s
+
+
 def row(n: int, shared: bool, rate: float, predict: bool, clock: str = "offline") -> dict[str, Any]:
     link: dict[str, Any] = {"profile": PROFILE, "shared": shared}
     if predict:
@@ -69,7 +80,8 @@ def row(n: int, shared: bool, rate: float, predict: bool, clock: str = "offline"
         same = same and off.summary.get("radio", {}).get("down") == run.summary.get("radio", {}).get("down")
     s = run.summary
     vehicles = [{"id": v["id"], "outcome": v["outcome"], "rms_3d": v["rms_3d"],
-                 "ended_s": len(r.trace["t"]) / rate, "lost": {d: v["link"][d]["lost_by"] for d in ("up", "down")}}
+                 "ended_s": ended_s(r.summary, len(r.trace["t"]) / rate),
+                 "lost": {d: v["link"][d]["lost_by"] for d in ("up", "down")}}
                 for v, r in zip(s["vehicles"], run.runs)]
     out: dict[str, Any] = {"vehicles_n": n, "radio": "one shared" if shared else "one each", "rate_hz": rate,
                            "predict": predict, "vehicles": vehicles, "wall_s": wall, "clock": s["clock"],
