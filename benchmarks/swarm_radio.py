@@ -126,9 +126,10 @@ def print_table(f: dict[str, Any]) -> None:
     clock = f["rows"][0]["clock"] if f["rows"] else "offline"
     print(f"{f['profile']}: {f['down_bps']:g} B/s down (242-byte ODOMETRY), {f['up_bps']:g} B/s up "
           f"({f['command_bytes']}-byte command); sine, line:2 formation; clock {clock}")
+    lockstep = any(r["same_as_offline"] is not None for r in f["rows"])  # (the column its rows add: a header for it)
     print("| vehicles | radio | law | rate (fits) | load down / radio | 3-D RMS per vehicle, m | down radio: occupancy,"
-          " queue wait p50, queue drops |")
-    print("|---|---|---|---|---|---|---|")
+          " queue wait p50, queue drops |" + (" against offline, wall |" if lockstep else ""))
+    print("|---|---|---|---|---|---|---|" + ("---|" if lockstep else ""))
     for r in f["rows"]:
         law = "BS-ST, predict" if r["predict"] else "BS-ST"
         rms = "; ".join(show(v) for v in r["vehicles"])

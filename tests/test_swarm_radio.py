@@ -82,16 +82,25 @@ def test_one_vehicle_on_a_shared_radio_flies_bit_for_bit_as_on_its_own(tmp_path:
     assert radio["lost_queue"] > 0 and radio["vehicles"][0]["share_bps"] <= 15000.0
 
 
-def test_the_benchmarks_table_says_when_a_failsafe_came_not_its_traces_end(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_the_benchmarks_table_says_when_a_failsafe_came_not_its_traces_end(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """README's table (``python benchmarks/swarm_radio.py``): four vehicles on one sik-57600 radio, vehicles 3 and 4
     in their failsafe at 0.52 s, which flies their descent on to the mission's end; the benchmark said "failsafe at
-    30.00 s" (its trace's end: a tour ran the README's command). A divergence is still said at its trace's end."""
+    30.00 s" (its trace's end: a tour ran the README's command). A divergence is still said at its trace's end.
+    With ``--lockstep`` each row adds a column (bit for bit against offline, the wall time): the header has it too
+    (its rows had one cell more than the header)."""
     bench = benchmark_module("swarm_radio")
     monkeypatch.chdir(bench.ROOT)  # (its mission's path is the checkout's, as figures() flies it)
     r = bench.row(4, True, 50.0, False)
     said = [bench.show(v) for v in r["vehicles"]]
     assert said[2:] == ["2.31 (failsafe at 0.52 s)"] * 2 and said[:2] == ["n/a (diverged at 1.02 s)",
                                                                           "n/a (diverged at 0.94 s)"], said
+    for same in (None, True):  # offline's table, and --lockstep's (the same row, as said against offline)
+        shown = {**r, "fits_hz": 3.7, "offered_down": 13.4, "same_as_offline": same, "wall_s": 1.0}
+        bench.print_table({"profile": "sik-57600", "down_bps": 3600.0, "up_bps": 3600.0, "command_bytes": 55,
+                           "rows": [shown], "loadavg": (0.0, 0.0, 0.0)})
+        head, rule, line = capsys.readouterr().out.splitlines()[1:4]
+        assert head.count("|") == rule.count("|") == line.count("|") == 8 + (same is not None), (head, line)
 
 
 def test_the_radio_admits_in_order_and_drops_what_would_wait_too_long() -> None:
