@@ -11,6 +11,7 @@ station connects (``--await-mission``: that it waits, with no time limit), and l
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import signal
 import socket
@@ -170,3 +171,48 @@ def test_the_pace_a_started_mission_flies_at_is_said_and_chosen_once() -> None:
     line = vehicle_up_line(Ready("vehicle", sysid=2, gcs="127.0.0.1:14551"), True, False, None)
     assert line.endswith("AUTO.MISSION and arm; it flies as fast as it goes (--speed 0; --speed X: at most X times "
                          "real time)"), line
+
+
+def test_a_signed_session_says_a_ground_station_must_sign_and_one_signing_as_sitl_md_says_flies_its_mission(
+        tmp_path: Path) -> None:
+    """``bsst sitl --await-mission --key K``: the line says every frame is signed and a ground station must sign
+    (it said only where to listen: a ground station that does not sign sees the telemetry and has every message
+    refused, its upload never answered); a pymavlink ground station set up as docs/sitl.md says (the vehicle's
+    HEARTBEAT heard, then ``setup_signing``) uploads a takeoff and a landing, starts them, and the session completes.
+    (With ``setup_signing`` before it had heard a frame, pymavlink's switch to MAVLink 2 at the first one rebuilt its
+    codec without the signing: every frame it sent was unsigned, the vehicle's ``rejected 1: unsigned 1``, a tour's
+    upload never answered.)"""
+    passphrase = b"correct horse battery staple"
+    key = tmp_path / "bsst.key"
+    key.write_bytes(passphrase + b"\n")
+    key.chmod(0o600)
+    items = [(mavlink.MAV_CMD_NAV_TAKEOFF, 473977420, 85455940, 2.0), (mavlink.MAV_CMD_NAV_LAND, 0, 0, 0.0)]
+    with instance_slot() as n:
+        sitl = Proc.bsst("sitl", "--await-mission", "--key", str(key), "--speed", "0", "--instance", str(n),
+                         "--out", str(tmp_path / "run"), "--no-plots", cwd=ROOT)
+        gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=255, source_component=190)
+        try:
+            line = sitl.wait_line(lambda s: s.startswith(UP), timeout=60)
+            assert line.startswith(said_up(n, n + 1) + "; every frame signed (--key): a ground station signs with "
+                                   "the same key, or the vehicle refuses what it sends (docs/sitl.md, Signing); "
+                                   "waiting"), line
+            assert gcs.wait_heartbeat(timeout=30) is not None  # (pymavlink now speaks the MAVLink 2 it heard)
+            gcs.setup_signing(hashlib.sha256(passphrase).digest(), sign_outgoing=True)
+            gcs.mav.mission_count_send(n + 1, 1, len(items), 0)
+
+            def uploaded() -> bool:  # answer the vehicle's requests until its ACK
+                m = gcs.recv_match(type=["MISSION_REQUEST_INT", "MISSION_ACK"], blocking=True, timeout=0.5)
+                if m is not None and m.get_type() == "MISSION_REQUEST_INT":
+                    cmd, lat, lon, alt = items[m.seq]
+                    gcs.mav.mission_item_int_send(n + 1, 1, m.seq, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, cmd, 0,
+                                                  1, 0, 0, 0, float("nan"), lat, lon, alt, 0)
+                return m is not None and m.get_type() == "MISSION_ACK" and m.type == mavlink.MAV_MISSION_ACCEPTED
+
+            wait_for(uploaded, 30.0, "the signed upload's MISSION_ACK ACCEPTED")
+            gcs.mav.command_long_send(n + 1, 1, mavlink.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+            assert sitl.p.wait(timeout=120) == 0
+        finally:
+            gcs.close()
+            sitl.stop()
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["outcome"] == "completed" and summary["sitl"]["signed"], summary["ended_by"]

@@ -50,11 +50,17 @@ def pace_words(realtime: bool, speed: float | None) -> str:
     return f"in lockstep at {speed:g}x real time (--speed X: X times; 0: as fast as it goes)"
 
 
-def vehicle_up_line(ready: Ready, await_mission: bool, realtime: bool = False, speed: float | None = None) -> str:
+SIGNED = ("; every frame signed (--key): a ground station signs with the same key, or the vehicle refuses what it "
+          "sends (docs/sitl.md, Signing)")
+
+
+def vehicle_up_line(ready: Ready, await_mission: bool, realtime: bool = False, speed: float | None = None,
+                    signed: bool = False) -> str:
     """The line (no newline) saying that the vehicle ``ready`` describes is up, where a ground station connects
-    (the address its ground-station link sends to, its system id) and, with ``await_mission``, that the session
-    waits, with no time limit, for a ground station's mission, and the pace it will fly it at
-    (:func:`pace_words`)."""
+    (the address its ground-station link sends to, its system id), with ``signed`` that it must sign
+    (:data:`SIGNED`: a ground station that does not sees the telemetry and has every message refused) and, with
+    ``await_mission``, that the session waits, with no time limit, for a ground station's mission, and the pace it
+    will fly it at (:func:`pace_words`)."""
     who = f"vehicle up, sysid {ready.sysid}"
     if ready.gcs is None:
         return f"{PREFIX}{who}: no ground-station link"
@@ -64,6 +70,8 @@ def vehicle_up_line(ready: Ready, await_mission: bool, realtime: bool = False, s
     else:
         line = (f"{PREFIX}{who}: a ground station connects by listening on UDP {ready.gcs}, where the vehicle "
                 f"sends its telemetry ({_listen_hints(ready.gcs)})")
+    if signed:
+        line += SIGNED
     if await_mission:
         line += ("; waiting, with no time limit (Ctrl-C stops), for a ground station to upload a mission and "
                  f"start it: MISSION_START, or AUTO.MISSION and arm; it flies {pace_words(realtime, speed)}")

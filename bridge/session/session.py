@@ -207,7 +207,8 @@ class Session:
             ready = self._wait_ready(self.vehicle)
             self._note("started", f"vehicle pid {self.vehicle.pid}: {ready.describe()}", "session")
             if self.announce:
-                sys.stderr.write(vehicle_up_line(ready, self.await_mission, self.realtime, self.speed) + "\n")
+                sys.stderr.write(vehicle_up_line(ready, self.await_mission, self.realtime, self.speed,
+                                                 signed=self.key is not None) + "\n")
                 sys.stderr.flush()
             if self.relay is not None:
                 line = self._wait_ready(self.relay).describe()
