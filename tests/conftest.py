@@ -174,12 +174,17 @@ def pytest_configure(config: pytest.Config) -> None:
     """pytest-xdist's controller (``-n N``, N > 0): compile (or load) the batch engine's kernels in a process of
     its own while the workers start and run their first tests, holding the session's batch lock until it is done;
     a worker's ``batch_kernels`` takes the lock after it and loads them from the cache (if the process fails, the
-    worker compiles them itself). The process is ended with the session (:func:`pytest_unconfigure`)."""
+    worker compiles them itself). The process is ended with the session (:func:`pytest_unconfigure`). Before the
+    workers start, it parses the test modules for their groups once, for every worker (tests/scheduling.py)."""
     if os.environ.get("PYTEST_XDIST_WORKER") or not getattr(config.option, "numprocesses", 0):
         return
     import subprocess
 
+    from tests.scheduling import write_groups  # the controller's parse, handed on to its workers
+
     shared = config._tmp_path_factory.getbasetemp()  # type: ignore[attr-defined]  # the workers' base's parent
+    write_groups(config.args, shared / "test-groups.json")
+
     lock = os.open(shared / "compile-batch.lock", os.O_WRONLY | os.O_CREAT, 0o644)
     fcntl.flock(lock, fcntl.LOCK_EX)  # held by the open file, which the child shares (pass_fds) until it ends
     config._batch_compile = subprocess.Popen(  # type: ignore[attr-defined]
@@ -240,7 +245,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     the batch engine (``batch_kernels``) come last: on a fresh clone its kernel is still compiling in its own
     process (:func:`pytest_configure`) when the workers begin. Every worker sorts alike (pytest-xdist requires one
     collection)."""
-    from tests.scheduling import scope_of  # (pure: each module's source read once)
+    from tests.scheduling import scope_of  # (pure: each module's source read once, or the controller's table)
 
     scopes = [scope_of(item.nodeid) for item in items]
     size = Counter(scopes)

@@ -9,7 +9,9 @@
 - :func:`tests.waiting.wait_for` waits, and fails naming what it waited for;
 - the tests that share a module-scoped fixture are one unit of work for pytest-xdist
   (:func:`tests.scheduling.scope_of`), so that one worker makes the fixture once; every other test is a
-  unit of its own; the cheap fixtures left out of it are module-scoped fixtures that exist;
+  unit of its own; the cheap fixtures left out of it are module-scoped fixtures that exist; the groups a
+  controller parsed are read, not parsed again, by its workers (:func:`tests.scheduling.write_groups`), unless
+  the module changed since;
 - :func:`tests.timeline.report` sums each file's wall and CPU time from the workers' lines, and with one worker
   ranks the tests by the machine's CPU time during each.
 
@@ -19,14 +21,17 @@ Checked with ``ast`` on each file's source, and shown failing on broken samples.
 from __future__ import annotations
 
 import ast
+import json
+import os
 import re
 import time
 from pathlib import Path
 
 import pytest
 
+from tests import scheduling
 from tests.quietgc import collector_off
-from tests.scheduling import CHEAP, is_marked_process, scope_of, shared_groups
+from tests.scheduling import CHEAP, is_marked_process, scope_of, shared_groups, write_groups
 from tests.timeline import report
 from tests.waiting import wait_for
 
@@ -224,6 +229,35 @@ def test_the_tests_sharing_a_module_fixture_are_one_unit_of_work() -> None:
         "tests/test_mission_end.py::test_offline_sine_ends_landed_and_disarmed"
     alone = "tests/test_link_trace.py::test_every_bad_row_is_named_by_file_and_line[x]"
     assert scope_of(alone) == alone
+
+
+def test_a_worker_reads_the_controllers_groups_unless_the_module_changed_since(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The controller's table (write_groups) is what a worker's scope_of answers from: a group put in it is the one
+    answered (no parse), and a module whose mtime or size differs from the table's is parsed again."""
+    path, test = "tests/test_mission_end.py", "test_offline_sine_ends_landed_and_disarmed"
+    parsed = scope_of(f"{path}::{test}")
+    table = tmp_path / "groups.json"
+    monkeypatch.setenv(scheduling.GROUPS_ENV, "")  # (put back as it was after: write_groups sets it)
+    try:
+        write_groups([str(ROOT / path) + "::" + test, str(ROOT / "tests" / "no_such_dir")], table)
+        assert os.environ[scheduling.GROUPS_ENV] == str(table)
+        written = json.loads(table.read_text())
+        assert list(written) == [path] and f"{path}::<{written[path][2][test]}>" == parsed, written
+        written[path][2][test] = "from-the-table"
+        table.write_text(json.dumps(written))
+        for cached in (scheduling._handed_on, scheduling._groups_in):
+            cached.cache_clear()
+        assert scope_of(f"{path}::{test}") == f"{path}::<from-the-table>"  # read, not parsed
+        written[path][1] += 1  # the module's size when the table was written: not the file's now
+        table.write_text(json.dumps(written))
+        for cached in (scheduling._handed_on, scheduling._groups_in):
+            cached.cache_clear()
+        assert scope_of(f"{path}::{test}") == parsed  # parsed again
+    finally:
+        monkeypatch.undo()
+        for cached in (scheduling._handed_on, scheduling._groups_in):
+            cached.cache_clear()
 
 
 def test_the_cheap_fixtures_left_unshared_are_module_fixtures_that_exist() -> None:
