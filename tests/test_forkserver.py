@@ -24,7 +24,7 @@ from bridge.nodes import forkserver
 from bridge.nodes.forkserver import ENV, ForkedChild, forked_cpu_s, start_child
 from bridge.nodes.report import Ready, parse_line
 from bridge.session.children import instance_slot
-from tests.sitlkit import Bsst
+from tests.sitlkit import Bsst, run_bsst
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -411,3 +411,31 @@ def test_a_plain_sessions_launcher_imports_no_sweep_nor_vehicle_code_and_its_chi
         log = (tmp_path / "run" / f"{child}.log").read_text()
         imported = [ln.rpartition("|")[2].strip() for ln in log.splitlines() if ln.startswith("import time:")]
         assert not imported, (child, imported)
+
+
+@pytest.mark.parametrize("command", ["sim", "sitl"])
+def test_a_launcher_forked_by_a_server_imports_nothing_at_its_start(tmp_path, monkeypatch, command) -> None:
+    """Before the first ``bsst sim`` or ``bsst sitl`` it forks, the server imports what the command imports at its
+    start (bridge.cli.forkserver.ChildWarmer: the flight's and the session's code, ~0.005 and ~0.016 CPU-s), so a
+    process flying run after run through it (a script, this suite) pays it once, not once a run:
+    neither the first child nor the next imports a module (Python's own import log, ``PYTHONPROFILEIMPORTTIME``, in
+    the server's environment: a line on the child's stderr per module it imports)."""
+    (tmp_path / "short.toml").write_text('name = "short"\nduration_s = 0.5\n[trajectory]\nkind = "sine"\n')
+    monkeypatch.setenv("PYTHONPROFILEIMPORTTIME", "1")
+    old = forkserver._the_server()
+    os.kill(old.proc.pid, signal.SIGKILL)  # the next child starts a server in this environment
+    wait_for(lambda: not _alive(old.proc.pid), 30, "the old server gone")
+    server = None
+    try:
+        with instance_slot() as n:
+            for run in ("one", "two"):
+                argv = [command, "short.toml", "--no-plots", "--out", run]
+                r = run_bsst(*argv, *(["--instance", str(n)] if command == "sitl" else []), cwd=tmp_path)
+                server = forkserver._the_server()
+                assert r.returncode == 0, r.stderr[-3000:]
+                imported = [ln.rpartition("|")[2].strip() for ln in r.stderr.splitlines()
+                            if ln.startswith("import time:") and "imported package" not in ln]
+                assert not imported, (run, " ".join(imported))
+    finally:
+        if server is not None:
+            os.kill(server.proc.pid, signal.SIGKILL)  # the worker's next child starts one in the suite's environment
