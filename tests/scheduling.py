@@ -124,16 +124,13 @@ def _handed_on() -> dict[str, list]:
 
 
 def write_groups(args: Iterable[str], where: Path) -> None:
-    """Parse the test modules ``args`` name (pytest's arguments: files, folders, test ids; those outside the
-    repository left out) and write each one's groups, with its :func:`_stamp`, as JSON to ``where``; name it in
-    :data:`GROUPS_ENV` for the processes started after (pytest-xdist's workers)."""
-    paths: set[str] = set()
-    for arg in args:
-        given = Path(arg.split("::", 1)[0]).resolve()
-        for f in sorted(given.rglob("test_*.py")) if given.is_dir() else [given]:
-            if f.suffix == ".py" and f.is_relative_to(ROOT) and f.is_file():
-                paths.add(f.relative_to(ROOT).as_posix())
-    table = {path: [*_stamp(path), _groups_in(path)] for path in sorted(paths)}
+    """Parse the suite's test modules (``tests/test_*.py``) that ``args`` name (pytest's arguments: files, folders,
+    test ids; a folder names those inside it) and write each one's groups, with its :func:`_stamp`, as JSON to
+    ``where``; name it in :data:`GROUPS_ENV` for the processes started after (pytest-xdist's workers)."""
+    given = [Path(arg.split("::", 1)[0]).resolve() for arg in args]
+    paths = [f.relative_to(ROOT).as_posix() for f in sorted((ROOT / "tests").glob("test_*.py"))
+             if any(f == g or f.is_relative_to(g) for g in given)]
+    table = {path: [*_stamp(path), _groups_in(path)] for path in paths}
     where.write_text(json.dumps(table), encoding="utf-8")
     os.environ[GROUPS_ENV] = str(where)
 
