@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from bridge.core.interrupt import sigint_futures
+from bridge.core.interrupt import sigint_futures, sigint_held
 from bridge.loop import StopAfterRecord, recorded_run
 from bridge.record.runlog import Run
 from tests.sitlkit import Proc, csv_rows
@@ -600,6 +600,27 @@ def test_a_stop_while_a_fleets_flight_is_judged_keeps_the_fleets_record(tmp_path
             assert csv_rows(out / f"vehicle-{v}" / "trace.csv") == 500
     finally:
         proc.stop()
+
+
+def test_a_held_blocks_release_gives_sigint_back_to_its_previous_handler_and_holds_it_again_after() -> None:
+    """:meth:`bridge.core.interrupt.Held.released`, around each control period's ``yield`` of a flight's end landing
+    (swapped with signal's C half since the forty-third session, 18 -> 3 us a period): inside, SIGINT's handler is the
+    one before the block and a SIGINT raises KeyboardInterrupt; a SIGINT that came before it is held (``pending``),
+    never raised; after it the held handler is back; after the block, the one before it."""
+    before = signal.getsignal(signal.SIGINT)
+    with sigint_held() as held:
+        mine = signal.getsignal(signal.SIGINT)
+        assert mine != before and not held.pending
+        with pytest.raises(KeyboardInterrupt), held.released():
+            assert signal.getsignal(signal.SIGINT) is before
+            signal.raise_signal(signal.SIGINT)
+            pytest.fail("SIGINT inside the release did not raise")  # (never reached)
+        assert signal.getsignal(signal.SIGINT) == mine and not held.pending
+        signal.raise_signal(signal.SIGINT)  # held: noted, not raised, here or in the release that follows
+        with held.released():
+            assert held.pending and signal.getsignal(signal.SIGINT) is before
+        assert signal.getsignal(signal.SIGINT) == mine
+    assert signal.getsignal(signal.SIGINT) is before
 
 
 def test_a_stop_carries_its_flights_run_only_when_held_until_it_was_recorded() -> None:
