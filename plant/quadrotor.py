@@ -23,6 +23,7 @@ advances one physics step. Commands are normalised and in the paper's frame:
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Callable
 
 from plant.battery import Battery
@@ -41,6 +42,8 @@ from plant.rotors import (
 from plant.wind import Wind, WindConfig
 
 AT_REST: State = (0.0,) * 12  # type: ignore[assignment]
+_STATE_BITS = struct.Struct("12d")  # a state's bits: -0.0 is not 0.0 here, as it is not in a trace's repr
+_HELD_BITS = struct.Struct("6d")  # the inputs a step holds: the realised wrench, the rotors' speed sum, h
 
 
 CRASH_SPEED_MPS = 2.0  # m/s: a touchdown faster than this breaks the vehicle (docs/weather.md "Outcomes")
@@ -107,6 +110,8 @@ class Quadrotor:
                         else None)
         self._speed_cap = 1.0  # the rotors' top speed now, a fraction of omega_max (the battery's sag)
         self.impact: tuple[float, float, float] | None = None  # the first hard touchdown: (t s, speed m/s, tilt rad)
+        # a state that is its own step with the inputs held (at rest on the ground: :meth:`step`), and those inputs
+        self._still: tuple[State, tuple[float, ...], Callable[..., tuple[float, ...]], bytes] | None = None
         self.command((0.0, 0.0, 0.0, 0.0))
 
     # -- actuation -----------------------------------------------------------------
@@ -155,8 +160,16 @@ class Quadrotor:
         """Advance one physics step (RK4 of eq. 6, command and rotor speeds held over the step).
 
         The same step as ``plant.integrate.rk4_step(self.derivative, ...)``, specialised
-        (:func:`plant.model.rk4_held`, or its compiled twin: :attr:`rk4`)."""
+        (:func:`plant.model.rk4_held`, or its compiled twin: :attr:`rk4`). A state whose last step, with the same
+        inputs held, gave it back bit for bit (at rest on the ground, motors off: a landing's disarm wait, a vehicle
+        waiting to take off) is its own next step too: not computed again, the clock advanced as by the step (a step
+        is a function of the state and the inputs alone where no battery, motor lag, disturbance or wind acts)."""
         t, h = self.t, self.dt
+        still = self._still
+        if still is not None and still[0] is self.state and still[1] is self.body.constants and still[2] is self.rk4 \
+                and self._pure() and still[3] == _HELD_BITS.pack(*self.realised, self._omega_d, h):
+            self.t = t + h
+            return
         if self.battery is not None:
             self._draw_battery(h)
         if self._lagged:
@@ -178,8 +191,17 @@ class Quadrotor:
             if self.impact is None:
                 self._touchdown(t + h, X)
             X = ground_contact(X)
+        self._still = None
+        if self._pure() and _STATE_BITS.pack(*X) == _STATE_BITS.pack(*self.state):
+            X = self.state  # (kept: the next step knows it by identity)
+            self._still = (X, self.body.constants, self.rk4, _HELD_BITS.pack(*self.realised, self._omega_d, h))
         self.state = X  # type: ignore[assignment]
         self.t = t + h
+
+    def _pure(self) -> bool:
+        """Whether a step is a function of the state and the inputs held alone (no battery, motor lag, disturbance or
+        wind: each of those has a state or a time of its own)."""
+        return self.battery is None and not self._lagged and not self._disturbed and self.wind is None
 
     def steps(self, n: int) -> None:
         """Advance n physics steps, the command held: the bits of n calls of :meth:`step`, in one kernel call

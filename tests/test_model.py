@@ -5,6 +5,8 @@
 - The translational part is checked against an independent rotation matrix
   R = Rz(psi) Ry(theta) Rx(phi) applied to the body thrust.
 - Hover is an equilibrium, and the optional effects act as documented.
+- A state that is its own step (at rest on the ground, motors off) is not computed again while the inputs hold: the
+  same bits and clock as each step computed, and computed again once a command changes.
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from plant import Disturbance, Effects, Quadrotor, load_profile
-from plant.model import rigid_body, state_derivative
+from plant.model import rigid_body, rk4_held, state_derivative
+from plant.quadrotor import ground_contact
 from plant.rotors import signed_speed_sum, wrench_from_motor_speeds
 
 # distinct inertias so that every I_x / I_y / I_z mix-up shows
@@ -197,3 +200,36 @@ def test_ground_and_divergence() -> None:
     assert q.diverged() == "state is not finite"
     q.state = (1e308, 0.0, 1e308) + (0.0,) * 9  # type: ignore[assignment]  # finite, but the sum overflows
     assert q.diverged() == "position beyond 100 m"
+
+
+@pytest.mark.parametrize("profile", ["paper", "x500"])
+def test_a_state_that_is_its_own_step_is_not_computed_again_and_gives_the_same_bits(profile: str) -> None:
+    """On the ground, motors off (a landing's disarm wait, a vehicle before take-off), each step's RK4 gives the
+    resting state back bit for bit (the ground's contact takes the fall out): Quadrotor.step computes it once (the
+    step that finds it), not 1 000 times, and its state and clock are each step's computed by hand. A
+    command that lifts it is computed again at once (the same bits as by hand, climbing)."""
+    q = Quadrotor(load_profile(profile), state=(1.25, 0.0, -0.5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.3, 0.0))
+    calls = []
+
+    def counted(*args: object) -> tuple[float, ...]:
+        calls.append(1)
+        return rk4_held(*args)
+
+    q.rk4 = counted
+    X, t = q.state, q.t
+    for _ in range(1000):
+        q.step()
+        Y = rk4_held(X, *q.realised, q._omega_d, q.body.constants, q.dt, None)
+        X = ground_contact(Y) if Y[4] < 0.0 else Y
+        t += q.dt
+        assert q.state == X and [math.copysign(1.0, v) for v in q.state] == [math.copysign(1.0, v) for v in X]
+        assert q.t == t
+    assert len(calls) == 1, len(calls)
+    lift = (1.0,) * 4 if q.profile.actuation == "motors" else (1.0, 0.0, 0.0, 0.0)
+    q.command(lift)
+    for _ in range(50):
+        q.step()
+        Y = rk4_held(X, *q.realised, q._omega_d, q.body.constants, q.dt, None)
+        X = ground_contact(Y) if Y[4] < 0.0 else Y
+        assert q.state == X
+    assert len(calls) == 51 and q.state[4] > 0.0, (len(calls), q.state[4])
