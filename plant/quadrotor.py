@@ -112,11 +112,18 @@ class Quadrotor:
         self.impact: tuple[float, float, float] | None = None  # the first hard touchdown: (t s, speed m/s, tilt rad)
         # a state that is its own step with the inputs held (at rest on the ground: :meth:`step`), and those inputs
         self._still: tuple[State, tuple[float, ...], Callable[..., tuple[float, ...]], bytes] | None = None
+        self._commanded: tuple[object, float, object] = (None, 0.0, None)  # the last command, speed cap, effectiveness
         self.command((0.0, 0.0, 0.0, 0.0))
 
     # -- actuation -----------------------------------------------------------------
     def command(self, c: tuple[float, float, float, float]) -> None:
-        """Set the normalised actuator command (see module docstring); held until the next."""
+        """Set the normalised actuator command (see module docstring); held until the next. The very command (the same
+        tuple) given again with the rotors' speed cap and effectiveness unchanged changes nothing: not computed again
+        (a vehicle on the ground is given its motors-off command each physics step of its disarm wait)."""
+        last = self._commanded
+        if last[0] is c and last[1] == self._speed_cap and last[2] is self.effectiveness:
+            return
+        self._commanded = (c, self._speed_cap, self.effectiveness)
         p = self.profile
         if p.actuation == "wrench":
             u = wrench_command(c, p.u_max)

@@ -6,7 +6,8 @@
   R = Rz(psi) Ry(theta) Rx(phi) applied to the body thrust.
 - Hover is an equilibrium, and the optional effects act as documented.
 - A state that is its own step (at rest on the ground, motors off) is not computed again while the inputs hold: the
-  same bits and clock as each step computed, and computed again once a command changes.
+  same bits and clock as each step computed, and computed again once a command changes; nor is the very command
+  given again.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from plant import Disturbance, Effects, Quadrotor, load_profile
+from plant import Disturbance, Effects, Quadrotor, load_profile, quadrotor
 from plant.model import rigid_body, rk4_held, state_derivative
 from plant.quadrotor import ground_contact
 from plant.rotors import signed_speed_sum, wrench_from_motor_speeds
@@ -233,3 +234,32 @@ def test_a_state_that_is_its_own_step_is_not_computed_again_and_gives_the_same_b
         X = ground_contact(Y) if Y[4] < 0.0 else Y
         assert q.state == X
     assert len(calls) == 51 and q.state[4] > 0.0, (len(calls), q.state[4])
+
+
+@pytest.mark.parametrize("profile", ["paper", "x500"])
+def test_the_very_command_given_again_is_not_computed_again(profile: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Quadrotor.command with the same tuple as its last (a vehicle's motors-off command each physics step of its
+    disarm wait) changes nothing and computes nothing; an equal new tuple is computed again; the same one after a
+    rotor's fault gives the fault's wrench: each the wrench a fresh plant realises for it."""
+    c = (0.6, 0.1, -0.1, 0.05) if profile == "paper" else (0.6, 0.5, 0.55, 0.7)
+    fresh = Quadrotor(load_profile(profile))
+    fresh.command(c)
+    name = "wrench_command" if profile == "paper" else "wrench_from_motor_speeds"
+    computed = []
+    real = getattr(quadrotor, name)
+    monkeypatch.setattr(quadrotor, name, lambda *a: computed.append(1) or real(*a))
+    q = Quadrotor(load_profile(profile))
+    for _ in range(100):
+        q.command(c)
+    assert len(computed) == 2, len(computed)  # (the plant's own first command, then c once)
+    assert q.realised == fresh.realised and q.omega == fresh.omega
+    q.command(tuple(c))  # (tuple() of a tuple is that very tuple: not computed)
+    q.command((*c,))  # (a new tuple, equal: computed)
+    assert len(computed) == 3 and q.realised == fresh.realised
+    if profile == "x500":  # a rotor's fault, then the same command: the fault's wrench, as a fresh plant's
+        q.set_effectiveness(2, 0.5)
+        q.command(q._commanded[0])
+        fresh.set_effectiveness(2, 0.5)
+        fresh.command(c)
+        assert q.realised == fresh.realised != quadrotor.wrench_from_motor_speeds(
+            q.omega, q.profile.thrust_coeff, q.profile.drag_coeff)
