@@ -23,9 +23,11 @@ from pathlib import Path
 
 import pytest
 
+from bridge import simulate
 from bridge.core.interrupt import sigint_futures, sigint_held
 from bridge.loop import StopAfterRecord, recorded_run
 from bridge.record.runlog import Run
+from missions import Mission, Sine
 from tests.sitlkit import Proc, csv_rows
 from tests.waiting import wait_for
 
@@ -621,6 +623,38 @@ def test_a_held_blocks_release_gives_sigint_back_to_its_previous_handler_and_hol
             assert held.pending and signal.getsignal(signal.SIGINT) is before
         assert signal.getsignal(signal.SIGINT) == mine
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_a_held_blocks_release_gives_back_a_default_or_python_handler_too() -> None:
+    """:meth:`Held.released` swaps with signal's C half, which refuses the enum ``signal.SIG_DFL`` that
+    ``signal.getsignal`` gives: a Python caller whose SIGINT handler was the default one had every offline flight
+    end in a TypeError at its end landing (from the forty-fourth session's swap until its review). A default handler
+    and a Python function are each given back inside the release and held again after it."""
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        for previous in (signal.SIG_DFL, lambda signum, frame: None):
+            signal.signal(signal.SIGINT, previous)
+            with sigint_held() as held:
+                mine = signal.getsignal(signal.SIGINT)
+                with held.released():
+                    assert signal.getsignal(signal.SIGINT) == previous
+                assert signal.getsignal(signal.SIGINT) == mine
+            assert signal.getsignal(signal.SIGINT) == previous
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
+def test_an_offline_flight_of_a_caller_with_the_default_sigint_handler_completes(tmp_path: Path) -> None:
+    """A script that set ``signal.SIG_DFL`` for SIGINT flies :func:`bridge.simulate` to its end (its end landing
+    releases the held stop each control period: the swap refused the enum and the flight died with no summary)."""
+    before = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    try:
+        run = simulate(Mission(Sine(), duration_s=0.5), out=tmp_path / "run", plots=False)
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert run.outcome == "completed"
+    assert (tmp_path / "run" / "summary.json").is_file()
 
 
 def test_a_stop_carries_its_flights_run_only_when_held_until_it_was_recorded() -> None:

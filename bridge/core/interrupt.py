@@ -234,8 +234,9 @@ def _swap_sigint(handler: Any) -> None:
     """``signal.signal(SIGINT, handler)`` without its enum conversions of the handlers (a Python call, as that one:
     a SIGINT already come is handled at its start by the handler it replaces). :meth:`Held.released` swaps twice a
     control period of a flight's end landing: 18 us a period with ``signal``'s, 3 with these (bridge/loop.py's
-    ~600 periods of a landing and its disarm wait, ~10 ms of every offline flight's CPU)."""
-    _signal.signal(signal.SIGINT, handler)
+    ~600 periods of a landing and its disarm wait, ~10 ms of every offline flight's CPU). ``signal.SIG_DFL`` (an enum
+    that signal's half takes and its C half refuses: a caller's default handler) goes as its number."""
+    _signal.signal(signal.SIGINT, int(handler) if isinstance(handler, signal.Handlers) else handler)
 
 
 @contextmanager
