@@ -833,7 +833,7 @@ def test_a_link_refused_without_a_file_names_no_file(files, capsys):
 
 def test_a_refused_path_that_begins_with_bsst_follows_bsst_colon(files, capsys, monkeypatch):
     """``bsst sim bsstm.toml`` of a missing file printed ``bsstm.toml: no such file``, without ``bsst: ``, until the
-    third wave's forty-third session: ``bsst``'s main told a refusal that opens with its own command (``bsst link
+    third wave's forty-fourth session: ``bsst``'s main told a refusal that opens with its own command (``bsst link
     extract: ...``) by its text's opening "bsst"; now by its typed source (params.ConfigError.source)."""
     monkeypatch.chdir(files.root)
     assert _refused(capsys, ["sim", "bsstm.toml"], "bsstm.toml") == "bsst: bsstm.toml: no such file"

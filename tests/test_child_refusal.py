@@ -4,7 +4,7 @@ process boundary travels typed, never as text to be cut.
 - A session's child (``bsst vehicle``, ``controller``, ``relay``) refused at its start writes its refusal as a
   ``bad_input`` report on stdout (its text and its ConfigError's ``source``, ``key``, ``what``) beside its line on
   stderr, which stays the person's; the session raises it again from those fields. Until the third wave's
-  forty-third session the session cut ``bsst: `` off the child's last stderr line: a law of the user's own that says
+  forty-fourth session the session cut ``bsst: `` off the child's last stderr line: a law of the user's own that says
   goodbye on stderr at its exit was said as the refusal (``bsst: mylaw: unloaded``), and a Python caller got a
   ConfigError with none of its typed fields.
 - Each kind of refusal a child can say (a ConfigError; a usage error of its command, ``bsst relay: ...``; one of

@@ -217,7 +217,7 @@ def test_public_functions_have_type_hints(parsed: Parsed) -> None:
 
 
 def test_no_refusal_is_reworded_by_matching_its_own_text() -> None:
-    """Until the third wave's forty-third session, eight places re-anchored or reworded a refusal by its words
+    """Until the third wave's forty-fourth session, eight places re-anchored or reworded a refusal by its words
     (``bridge/core/flight.py``'s ``str(exc).startswith(f"{src}: ")`` among them), and one named the flag the user did
     not type: ``--up-link-trace F --down-link-trace F`` was refused as ``--link-trace F``."""
     found = [p for pkg in ("bridge", "missions", "params") for f in sorted((ROOT / pkg).rglob("*.py"))
@@ -229,7 +229,7 @@ def test_no_refusal_is_reworded_by_matching_its_own_text() -> None:
 
 
 def test_no_report_or_event_is_read_by_its_words() -> None:
-    """Until the third wave's forty-third session the session cut ``bsst: `` off a child's last stderr line to say why
+    """Until the third wave's forty-fourth session the session cut ``bsst: `` off a child's last stderr line to say why
     it refused (a law's own goodbye at its exit was said instead), and bridge.record.ending cut the end action's answer
     out of the controller's ``end`` event's text after its last ``): ``; both now read typed fields (the ``bad_input``
     report, the event's ``result``). No module of ``bridge/`` reads such words again."""

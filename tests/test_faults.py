@@ -385,7 +385,7 @@ def test_gps_outage_drifts_and_is_reported() -> None:
 
 def test_gps_outages_are_told_by_the_fault_events_typed_gps_not_by_their_words() -> None:
     """``summary.json["gps_outages"]`` reads each fault event's ``gps`` (the GPS it leaves on or off: the vehicle's
-    typed field, as it travels from a session's vehicle process), never its text: until the third wave's forty-third
+    typed field, as it travels from a session's vehicle process), never its text: until the third wave's forty-fourth
     session it matched the text ``gps off`` / ``gps on``, and an outage said in other words (or with its sender's
     ``[by ...]``, as summary.json shows a ground station's injection) was no outage."""
     t = np.arange(0.0, 10.0, 0.5)
@@ -476,7 +476,7 @@ def test_a_ground_stations_real_time_flight_flies_its_timeline_and_disturbance_f
     """A real-time vehicle's plant runs 1.664 s on the ground, then a ground station arms it in TAKEOFF
     (Commander: SimVehicle.start_mission_clock_now): flown by its own controller from there, its flight is the one
     armed at the start, the robust mission's sine disturbance and a wind step at 0.2 s included, the wind said 0.2 s
-    into it; a controller's first target later (start_mission_clock) moves its time 0 no more. Until the forty-third
+    into it; a controller's first target later (start_mission_clock) moves its time 0 no more. Until the forty-fourth
     session such a flight held both for a target that never came (no wind, no disturbance)."""
     mission = load_mission(ROOT / "missions" / "robust.toml").with_overrides(
         duration_s=1.0, events=({"t_s": 0.2, "kind": "wind", "speed_mps": 3.0},))

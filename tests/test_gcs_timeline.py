@@ -5,7 +5,7 @@ says it never flew it.
 A real ``bsst vehicle --realtime`` on 127.0.0.1 with no controller at all, flown by a pymavlink ground station as
 QGroundControl flies PX4: NAV_TAKEOFF, then an arm (armed in TAKEOFF, the vehicle's own controller flies). Its
 mission's ``[[events]]`` act at their time of that flight, counted from the arm's control step (docs/weather.md, "In
-real time"); until the forty-third session the real-time vehicle held its timeline (and its gusts and disturbance)
+real time"); until the forty-fourth session the real-time vehicle held its timeline (and its gusts and disturbance)
 until a controller's first target, which such a flight never sends: the events never acted and nothing said so.
 """
 
@@ -87,7 +87,7 @@ def test_a_flight_whose_time_0_never_came_says_its_timeline_was_never_flown(tmp_
     """A real-time vehicle armed by its controller (a pymavlink one, on the controller link), which then sends no
     target, as one that died after its arm: the flight's time 0 never comes, and the vehicle's failsafe stops the
     motors on the ground. Stopped (Ctrl-C), the vehicle says the failsafe ended its flight and, for each event of its
-    timeline, that it was never flown and why; exit 1. Until the forty-third session it said the failsafe alone:
+    timeline, that it was never flown and why; exit 1. Until the forty-fourth session it said the failsafe alone:
     nothing named the events never flown."""
     mission = tmp_path / "gcswind.toml"
     mission.write_text(WINDY)

@@ -606,7 +606,7 @@ def test_a_stop_while_a_fleets_flight_is_judged_keeps_the_fleets_record(tmp_path
 
 def test_a_held_blocks_release_gives_sigint_back_to_its_previous_handler_and_holds_it_again_after() -> None:
     """:meth:`bridge.core.interrupt.Held.released`, around each control period's ``yield`` of a flight's end landing
-    (swapped with signal's C half since the forty-third session, 18 -> 3 us a period): inside, SIGINT's handler is the
+    (swapped with signal's C half since the forty-fourth session, 18 -> 3 us a period): inside, SIGINT's handler is the
     one before the block and a SIGINT raises KeyboardInterrupt; a SIGINT that came before it is held (``pending``),
     never raised; after it the held handler is back; after the block, the one before it."""
     before = signal.getsignal(signal.SIGINT)

@@ -286,7 +286,7 @@ def test_a_flags_trace_that_does_not_fit_the_flight_is_named_as_the_flag(tmp_pat
 
 def test_a_trace_the_up_and_down_flags_give_is_named_as_the_flags_typed(tmp_path: Path, capsys) -> None:
     """``--up-link-trace F --down-link-trace F`` of a trace too short for the mission was refused as ``--link-trace F
-    lasts 2 s ...``, a flag the user did not type, until the third wave's forty-third session (and a file bad alone
+    lasts 2 s ...``, a flag the user did not type, until the third wave's forty-fourth session (and a file bad alone
     so): the override table writes ``--link-trace F`` as both directions' traces, and the refusal guessed the flag
     from the table (both the same: ``--link-trace``) and matched the refusal's text. Now the flags are kept as typed
     (``Overrides.link_flags``) and the refusal is read by its fields: the direction refused is named by the flag that

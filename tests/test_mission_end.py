@@ -277,7 +277,7 @@ def test_a_landing_with_no_auto_disarm_is_as_asked_in_a_session(tmp_path: Path) 
 def test_the_end_actions_answer_is_read_from_its_typed_field_never_cut_out_of_its_text() -> None:
     """``summary.json["end"]["why"]`` of an end action the vehicle never took is the answer its command had, the
     controller's ``end`` event's ``result`` (bridge.nodes.report.Event), whatever the text says: until the third wave's
-    forty-third session bridge.record.ending cut it out of the text after its last ``): `` ("accepted" without one),
+    forty-fourth session bridge.record.ending cut it out of the text after its last ``): `` ("accepted" without one),
     so a text reworded for people would have changed the record (both the cases below said ``accepted`` or the text's
     tail)."""
     failsafe = RunEvent.at(2.3, "failsafe", "no actuator target for 0.5 s: LAND", "vehicle")

@@ -109,7 +109,7 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 def _typed_refusal(work: Callable[[], int]) -> int:
     """``work()``, a usage error raised as the typed ConfigError it is said from (flags.as_config_error): a watched
-    child's refusal goes back to this command's process by its fields (until the third wave's forty-third session by
+    child's refusal goes back to this command's process by its fields (until the third wave's forty-fourth session by
     its text, said there after a second ``bsst: ``: ``bsst: bsst: --link-trace / --up-link-trace cannot be combined
     ...``)."""
     try:

@@ -258,7 +258,7 @@ class Session:
         """A child is gone: say so by name. Its refusal of its input at its start (its ``bad_input`` report,
         :attr:`~bridge.session.children.Child.refused`) is the user's: raised again from its typed fields, said as
         the child said it; anything else is ours, said with the last line of its stderr (quoted, never read: until the
-        third wave's forty-third session a refusal was cut out of that line, and a law's own line at its exit, after
+        third wave's forty-fourth session a refusal was cut out of that line, and a law's own line at its exit, after
         the refusal's, was said as the refusal)."""
         if starting and child.refused is not None:
             raise child.refused.error()
