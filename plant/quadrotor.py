@@ -111,7 +111,7 @@ class Quadrotor:
         self._speed_cap = 1.0  # the rotors' top speed now, a fraction of omega_max (the battery's sag)
         self.impact: tuple[float, float, float] | None = None  # the first hard touchdown: (t s, speed m/s, tilt rad)
         # a state that is its own step with the inputs held (at rest on the ground: :meth:`step`), and those inputs
-        self._still: tuple[State, tuple[float, ...], Callable[..., tuple[float, ...]], bytes] | None = None
+        self._still: tuple[State, tuple[float, ...], Callable[..., tuple[float, ...]], bytes, bool] | None = None
         self._commanded: tuple[object, float, object] = (None, 0.0, None)  # the last command, speed cap, effectiveness
         self.command((0.0, 0.0, 0.0, 0.0))
 
@@ -119,9 +119,10 @@ class Quadrotor:
     def command(self, c: tuple[float, float, float, float]) -> None:
         """Set the normalised actuator command (see module docstring); held until the next. The very command (the same
         tuple) given again with the rotors' speed cap and effectiveness unchanged changes nothing: not computed again
-        (a vehicle on the ground is given its motors-off command each physics step of its disarm wait)."""
+        (a vehicle on the ground is given its motors-off command each physics step of its disarm wait); a list or
+        array, which its caller may fill again, is computed each time."""
         last = self._commanded
-        if last[0] is c and last[1] == self._speed_cap and last[2] is self.effectiveness:
+        if last[0] is c and type(c) is tuple and last[1] == self._speed_cap and last[2] is self.effectiveness:
             return
         self._commanded = (c, self._speed_cap, self.effectiveness)
         p = self.profile
@@ -174,7 +175,8 @@ class Quadrotor:
         t, h = self.t, self.dt
         still = self._still
         if still is not None and still[0] is self.state and still[1] is self.body.constants and still[2] is self.rk4 \
-                and self._pure() and still[3] == _HELD_BITS.pack(*self.realised, self._omega_d, h):
+                and still[4] == self.ground and self._pure() and still[3] == _HELD_BITS.pack(*self.realised,
+                                                                                            self._omega_d, h):
             self.t = t + h
             return
         if self.battery is not None:
@@ -201,7 +203,8 @@ class Quadrotor:
         self._still = None
         if self._pure() and _STATE_BITS.pack(*X) == _STATE_BITS.pack(*self.state):
             X = self.state  # (kept: the next step knows it by identity)
-            self._still = (X, self.body.constants, self.rk4, _HELD_BITS.pack(*self.realised, self._omega_d, h))
+            self._still = (X, self.body.constants, self.rk4, _HELD_BITS.pack(*self.realised, self._omega_d, h),
+                           self.ground)
         self.state = X  # type: ignore[assignment]
         self.t = t + h
 

@@ -263,3 +263,25 @@ def test_the_very_command_given_again_is_not_computed_again(profile: str, monkey
         fresh.command(c)
         assert q.realised == fresh.realised != quadrotor.wrench_from_motor_speeds(
             q.omega, q.profile.thrust_coeff, q.profile.drag_coeff)
+
+
+def test_a_command_buffer_filled_again_and_a_ground_taken_away_are_computed_again() -> None:
+    """The plant's two caches (a command given again, a state that is its own step) hold only what cannot change
+    under them: a list given again, its values changed in place, is the new command (a caller's buffer); a resting
+    state whose ground is taken away (``ground = False``: free flight) falls, not rests on."""
+    q = Quadrotor(load_profile("paper"))
+    buffer = [0.6, 0.0, 0.0, 0.0]
+    q.command(buffer)  # type: ignore[arg-type]
+    first = q.realised
+    buffer[0] = 0.2
+    q.command(buffer)  # type: ignore[arg-type]
+    fresh = Quadrotor(load_profile("paper"))
+    fresh.command((0.2, 0.0, 0.0, 0.0))
+    assert q.realised == fresh.realised != first
+    rest = Quadrotor(load_profile("paper"))
+    for _ in range(3):
+        rest.step()
+    assert rest.state[4] == 0.0
+    rest.ground = False
+    rest.step()
+    assert rest.state[4] < 0.0 and rest.state[5] < 0.0
