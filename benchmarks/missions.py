@@ -4,7 +4,8 @@ In:  a plan (``examples/box.plan`` by default; ``.plan`` or ``QGC WPL 110``), op
      directory of the same plan to compare with
 Out: printed: completed, landed and disarmed; the distance (m) of the flight to each waypoint the plan names;
      the 3-D RMS (m) of the tracking error with BS-ST; the jump of the reference velocity (m/s) across each
-     pass-through waypoint; with ``--sitl DIR``, the largest position difference (m) between it and offline
+     pass-through waypoint; the yaw reference's figures (:func:`yaw_figures`); with ``--sitl DIR``, the largest
+     position difference (m) between it and offline
 
     python benchmarks/missions.py [examples/box.plan] [--sitl runs/box-sitl]
 """
@@ -28,6 +29,29 @@ from missions.mission import is_plan_file  # noqa: E402
 from missions.planfiles import read_plan_text  # noqa: E402
 from missions.route import Limits, route_of  # noqa: E402
 from params import read_text_file  # noqa: E402
+
+
+def yaw_figures(ref: Smooth, named: set[int], samples: int = 200) -> dict:
+    """The yaw reference's figures (rad, rad/s): on the straight legs whose two guide knots (unnamed knots, the
+    route's) both hold the leg's heading, the most it is off that heading between them; the most it passes its
+    segment's knots' yaws anywhere; its peak rate (against MPC_YAWRAUTO_MAX)."""
+    ks = ref.knots
+    off = past = rate = 0.0
+    legs = held = 0
+    for j in range(len(ks) - 1):
+        a, b = ks[j], ks[j + 1]
+        heading = math.atan2(b.y - a.y, b.x - a.x)
+        straight = j > 0 and j not in named and j + 1 not in named and math.hypot(b.x - a.x, b.y - a.y) > 1.0
+        holds = straight and all(abs(math.remainder(k.psi - heading, 2 * math.pi)) < 1e-9 for k in (a, b))
+        legs, held = legs + straight, held + holds
+        for i in range(1, samples):
+            p = ref.sample(a.t + (b.t - a.t) * i / samples)[3]
+            past = max(past, p[0] - max(a.psi, b.psi), min(a.psi, b.psi) - p[0])
+            rate = max(rate, abs(p[1]))
+            if holds:
+                off = max(off, abs(math.remainder(p[0] - heading, 2 * math.pi)))
+    return {"straight_legs": legs, "holding_heading": held, "off_heading_rad": off, "past_knots_rad": past,
+            "peak_rate_rad_s": rate}
 
 
 def figures(plan: Path) -> dict:
@@ -59,7 +83,8 @@ def figures(plan: Path) -> dict:
             "landed_and_disarmed": bool(end.get("disarmed")) and abs(end.get("disarm_z_m", math.inf)) <= 0.05
             and abs(float(z[-1])) <= 0.05,
             "rms_3d_all_m": math.sqrt(sum(run.summary["axes"][a]["rms_all"] ** 2 for a in "xyz")),
-            "waypoints": passes, "pass_through": jumps, "trace": tr}
+            "waypoints": passes, "pass_through": jumps, "trace": tr,
+            "yaw": yaw_figures(ref, {k for _, k, _ in route.waypoints})}
 
 
 def sitl_difference(trace: dict, run_dir: Path) -> float:
@@ -84,6 +109,10 @@ def main() -> None:
         print(f"  {w['item']:<20} {'stop' if w['stop'] else 'pass'}  closest {w['closest_m']:.2e} m")
     for j in fig["pass_through"]:
         print(f"  pass-through {j['item']:<20} speed {j['speed_m_s']:.3f} m/s  velocity jump {j['jump_m_s']:.1e} m/s")
+    y = fig["yaw"]
+    print(f"yaw: {y['holding_heading']} of {y['straight_legs']} straight legs hold their heading at both guide knots, "
+          f"off it between them by <= {math.degrees(y['off_heading_rad']):.2f} deg; past its knots by <= "
+          f"{math.degrees(y['past_knots_rad']):.2f} deg; peak rate {math.degrees(y['peak_rate_rad_s']):.2f} deg/s")
     if args.sitl:
         diff = sitl_difference(fig["trace"], Path(args.sitl))
         summary = json.loads((Path(args.sitl) / "summary.json").read_text())

@@ -3,7 +3,8 @@
 In:  knots (t s, x, y, z m, psi rad in the paper frame, and whether the vehicle stops there), solved once
 Out: :class:`Smooth`, a :class:`~missions.references.Reference`: ``sample(t)`` gives each axis with its
      1st to 4th derivatives (m/s .. m/s⁴, rad/s .. rad/s⁴); :func:`demands` the thrust (N) and tilt
-     (rad) the law will need along it; ``to_dict()`` the ``[trajectory]`` table (``kind = "smooth"``)
+     (rad) the law will need along it; ``to_dict()`` the ``[trajectory]`` table (``kind = "smooth"``);
+     :func:`yaw_rate_peaks` and ``snap_yaw_rate(t)`` (rad/s) for the route's timing
 
 Each segment between two knots is, per axis, a polynomial of degree 7 in the normalised time
 s = (t - t_j) / T_j. The polynomials pass through every knot. At a knot the vehicle stops at (the
@@ -34,6 +35,18 @@ the runs between stops come out independent. (Hermite data at the knots as unkno
 3, with continuity of 4 to 6 as a 3×3 block-tridiagonal system, was tried: it cancels where a short
 segment lies between long ones, the error growing as about (T_long/T_short)^7 eps: 5e-9 of the
 coefficients at a ratio of 10, 5e-5 at 100, against at most 1e-12 here.)
+
+The yaw is not flown on its minimum-snap polynomial (:func:`yaw_pieces`): that one overshoots between knots (on
+a plan's straight leg, whose two guide knots both hold the leg's heading, by up to 12°; 29° round an out-and-back
+waypoint). Each segment's yaw is a quintic Hermite piece instead, its second derivative zero at both knots (so
+psi, psi' and psi'', which the law uses, are continuous; psi''' and psi'''' are each piece's own, and jump at the
+knots): at a stop (and the first and last knot) the rate is zero; elsewhere it is the harmonic mean of the two
+neighbouring segments' mean rates when they turn the same way, else zero. With both end rates within twice the
+segment's mean rate (the harmonic mean's bound) a quintic piece is monotone, so the yaw never passes its knots'
+values: it holds a value two knots share (a straight leg's heading) exactly, and turns one way between others.
+Until the third wave's forty-fourth session the yaw was the polynomial's, as the positions are. The minimum-snap
+yaw is kept (``snap_yaw_rate``): the route still times its legs by it, so that every position is what it was, to
+the bit.
 """
 
 from __future__ import annotations
@@ -60,6 +73,12 @@ class Knot:
     z: float
     psi: float = 0.0
     stop: bool = False
+
+
+def knot_arrays(knots: tuple[Knot, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The knots' times (s), yaws (rad) and stops, as arrays (:func:`yaw_pieces`)."""
+    return (np.array([k.t for k in knots]), np.array([k.psi for k in knots]),
+            np.array([k.stop for k in knots], dtype=bool))
 
 
 def _falling(k: int, m: int) -> float:
@@ -126,6 +145,44 @@ def solve(knots: tuple[Knot, ...]) -> np.ndarray:
     return c[:n].transpose(0, 2, 1)
 
 
+def yaw_pieces(t: np.ndarray, psi: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """Coefficients, shape (segments, 8), of the yaw's quintic Hermite pieces in normalised time (module
+    docstring) through knots at times ``t`` (s) of yaw ``psi`` (rad), ``stop`` where at rest: rate zero at stops
+    and the ends, else the harmonic mean of the neighbouring mean rates (zero where they differ in sign or one is
+    zero), psi'' zero at every knot."""
+    T, D = np.diff(t), np.diff(psi)
+    rate = np.zeros(len(t))
+    if len(t) > 2:
+        a, b = D[:-1] / T[:-1], D[1:] / T[1:]
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            mean = np.where(a * b > 0.0, 2.0 * a * b / (a + b), 0.0)
+        rate[1:-1] = np.where(stop[1:-1], 0.0, mean)
+    m0, m1 = rate[:-1] * T, rate[1:] * T  # per normalised time
+    c = np.zeros((len(T), ORDER))
+    c[:, 0], c[:, 1] = psi[:-1], m0
+    c[:, 3] = 10.0 * D - 6.0 * m0 - 4.0 * m1
+    c[:, 4] = -15.0 * D + 8.0 * m0 + 7.0 * m1
+    c[:, 5] = 6.0 * D - 3.0 * (m0 + m1)
+    return c
+
+
+def yaw_rate_peaks(t: np.ndarray, psi: np.ndarray, stop: np.ndarray) -> np.ndarray:
+    """The largest |psi'| (rad/s) over each segment of :func:`yaw_pieces`' yaw, exactly: at an end, or where
+    psi'' = s (6 c3 + 12 c4 s + 20 c5 s²) / T² is zero inside."""
+    c, T = yaw_pieces(t, psi, stop), np.diff(t)
+    qa, qb, qc = 20.0 * c[:, 5], 12.0 * c[:, 4], 6.0 * c[:, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = np.sqrt(qb * qb - 4.0 * qa * qc)
+        linear = -qc / qb
+        at = [np.zeros_like(T), np.ones_like(T), (-qb + root) / (2.0 * qa), (-qb - root) / (2.0 * qa),
+              np.where(qa == 0.0, linear, np.nan)]
+    peak = np.zeros_like(T)
+    for s in at:
+        s = np.where((s >= 0.0) & (s <= 1.0), s, 0.0)  # outside the segment (or NaN): its start instead
+        peak = np.maximum(peak, np.abs(c[:, 1] + 3.0 * c[:, 3] * s**2 + 4.0 * c[:, 4] * s**3 + 5.0 * c[:, 5] * s**4))
+    return peak / T
+
+
 def _derivs(c: tuple[float, ...], s: float, T: float) -> Derivs:
     """Value and derivatives 1..4 (per second) at s of the polynomial sum c_k s^k over a segment of T s."""
     out = []
@@ -158,9 +215,12 @@ class Smooth:
         coeffs = solve(self.knots)
         if not np.isfinite(coeffs).all():
             raise ValueError("the minimum-snap system has no finite solution")
+        snap_yaw = tuple(tuple(float(v) for v in coeffs[j, 3]) for j in range(len(coeffs)))
+        coeffs[:, 3] = yaw_pieces(*knot_arrays(self.knots))  # the yaw flown: monotone between knots (module docstring)
         table = tuple(tuple(tuple(float(v) for v in coeffs[j, a]) for a in range(4)) for j in range(len(coeffs)))
         object.__setattr__(self, "_times", times)
         object.__setattr__(self, "_coeffs", table)
+        object.__setattr__(self, "_snap_yaw", snap_yaw)
 
     def sample(self, t: float) -> Sample:
         times: list[float] = self._times  # type: ignore[attr-defined]
@@ -173,6 +233,16 @@ class Smooth:
         s = (t - times[j]) / T
         c = self._coeffs[j]  # type: ignore[attr-defined]
         return (_derivs(c[0], s, T), _derivs(c[1], s, T), _derivs(c[2], s, T), _derivs(c[3], s, T))
+
+    def snap_yaw_rate(self, t: float) -> float:
+        """psi' (rad/s) at t of the minimum-snap yaw through the knots, which is not flown (module docstring):
+        the route times its legs by it, as it did when it was flown."""
+        times: list[float] = self._times  # type: ignore[attr-defined]
+        if t <= times[0] or t >= times[-1]:
+            return 0.0
+        j = bisect.bisect_right(times, t) - 1
+        T = times[j + 1] - times[j]
+        return _derivs(self._snap_yaw[j], (t - times[j]) / T, T)[1]  # type: ignore[attr-defined]
 
     @property
     def end_s(self) -> float:

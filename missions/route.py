@@ -21,6 +21,10 @@ Times: each leg first gets 2 sqrt(T) of its constant-speed time T (:func:`_first
 between two stops is scaled as one, so that the polynomial's own peak speed, acceleration and yaw rate
 meet the limits exactly where they bind (time scaling is exact: speed goes as 1/k, acceleration 1/k²),
 times rounded up to 1 ms. Per-leg factors were tried: the legs are coupled and that iteration diverges.
+The yaw rate there is the minimum-snap yaw's, by which the legs were timed when it was flown (so every position
+keeps its time, to the bit); the yaw flown is monotone between knots (:mod:`missions.minsnap`), kept within
+MPC_YAWRAUTO_MAX by spreading a turn too quick for its corner along the legs beside it (:func:`spread_turns`:
+guide knots' yaws moved); a turn between knots that cannot move (waypoints, stops) over it slows its piece.
 """
 
 from __future__ import annotations
@@ -28,8 +32,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from missions.geodetic import Home
-from missions.minsnap import Knot, Smooth
+from missions.minsnap import Knot, Smooth, knot_arrays, yaw_rate_peaks
 from missions.planfiles import (
     DO_CHANGE_SPEED,
     MAX_HOLD_S,
@@ -48,6 +54,7 @@ MAX_SPEED_M_S = 12.0  # PX4's MPC_XY_VEL_MAX default: a faster cruise or DO_CHAN
 SAMPLING_MARGIN = 1.002  # the peaks fall between samples: 48 a leg see them to about 1e-5; this keeps them under
 SAMPLES_PER_LEG = 48  # samples of each leg's speed, acceleration and yaw rate against the limits
 GUIDE_SHARE = 0.2  # guide points this share of a horizontal leg from its ends (with_guides)
+MAX_SPREAD_SWEEPS = 200  # spread_turns: sweeps over the segments at most (the tests' plans need at most 9)
 
 
 @dataclass(frozen=True)
@@ -310,18 +317,62 @@ def _knots(pts: list[Stop], psi: list[float], legs: list[float]) -> tuple[tuple[
     return tuple(knots), at
 
 
-def _leg_ratio(ref: Smooth, k0: Knot, k1: Knot, b: Stop, lim: Limits) -> float:
-    """How far the trajectory's peaks on the leg k0 -> k1 exceed the limits: > 1 too fast, < 1 slow;
-    speed ratios count as they are, accelerations as their square root (time scales both so)."""
+def _leg_ratio(ref: Smooth, j: int, b: Stop, lim: Limits) -> float:
+    """How far the trajectory's peaks on the leg from knot j to j + 1 exceed the limits: > 1 too fast, < 1 slow;
+    speed ratios count as they are, accelerations as their square root (time scales both so). The yaw's: the
+    minimum-snap yaw's rate, by which the legs were timed when it was flown (so the positions keep their times;
+    the yaw flown is kept within the limit by :func:`spread_turns`)."""
+    k0, k1 = ref.knots[j], ref.knots[j + 1]
     worst = 0.0
     yaw_max = math.radians(lim.MPC_YAWRAUTO_MAX)
     for i in range(1, SAMPLES_PER_LEG):
-        x, y, z, p = ref.sample(k0.t + (k1.t - k0.t) * i / SAMPLES_PER_LEG)
+        t = k0.t + (k1.t - k0.t) * i / SAMPLES_PER_LEG
+        x, y, z, _ = ref.sample(t)
         vz, az = z[1], z[2]
         worst = max(worst, math.hypot(x[1], y[1]) / b.xy, (vz / b.up) if vz > 0 else (-vz / b.dn),
-                    abs(p[1]) / yaw_max, math.sqrt(math.hypot(x[2], y[2]) / lim.MPC_ACC_HOR),
+                    abs(ref.snap_yaw_rate(t)) / yaw_max, math.sqrt(math.hypot(x[2], y[2]) / lim.MPC_ACC_HOR),
                     math.sqrt(az / lim.MPC_ACC_UP_MAX if az > 0 else -az / lim.MPC_ACC_DOWN_MAX))
     return worst
+
+
+def spread_turns(knots: tuple[Knot, ...], free: list[bool], yaw_max: float) -> np.ndarray:
+    """The knots' yaws (rad), those of the ``free`` ones (guide knots) moved so that the yaw flown
+    (:func:`missions.minsnap.yaw_pieces`) keeps within ``yaw_max`` (rad/s) where it can: each segment over it has
+    its free ends moved towards each other, by half the share of its turn its peak is over (aiming 0.2 % under;
+    the whole share moves them too far, as the rates at its ends fall with it, and the turn leaves the heading
+    earlier than it needs), until none is over, nothing can move, or :data:`MAX_SPREAD_SWEEPS` sweeps. A turn too
+    quick for its corner so spreads along the straight legs beside it, monotone: a moved knot stays between its
+    neighbours. A turn that fits leaves every knot as it is (the box's)."""
+    t, psi, stop = knot_arrays(knots)
+    psi = psi.copy()
+    for _ in range(MAX_SPREAD_SWEEPS):
+        peaks = yaw_rate_peaks(t, psi, stop)
+        moved = False
+        for j in np.flatnonzero(peaks > yaw_max):
+            ends = [i for i in (j, j + 1) if free[i]]
+            if ends:
+                x = (psi[j + 1] - psi[j]) * (1.0 - yaw_max / (peaks[j] * SAMPLING_MARGIN)) / (2 * len(ends))
+                if free[j]:
+                    psi[j] += x
+                if free[j + 1]:
+                    psi[j + 1] -= x
+                moved = True
+        if not moved:
+            break
+    return psi
+
+
+def _scale(legs: list[float], ratios: list[float], pts: list[Stop], over_only: bool = False) -> None:
+    """Scale each piece between two stops as one, in place, so that its peak meets the limits (``ratios``: each
+    leg's peak over its limit); ``over_only``: only the pieces over them."""
+    first = 0
+    for i in range(len(legs)):
+        if pts[i + 1].stop:
+            factor = max(ratios[first:i + 1]) * SAMPLING_MARGIN
+            if not over_only or max(ratios[first:i + 1]) > 1.0:
+                for j in range(first, i + 1):
+                    legs[j] = math.ceil(legs[j] * factor * 1000.0) / 1000.0  # whole ms, up: never over the limits
+            first = i + 1
 
 
 def route_of(plan: PlanFile, limits: Limits, envelope_m: float) -> Route:
@@ -331,16 +382,20 @@ def route_of(plan: PlanFile, limits: Limits, envelope_m: float) -> Route:
     legs = [_first_time(pts[i], pts[i + 1], limits) for i in range(len(pts) - 1)]
     knots, at = _knots(pts, psi, legs)
     ref = Smooth(knots)
-    ratios = [_leg_ratio(ref, knots[at[i] + (1 if pts[i].hold_s > 0 else 0)], knots[at[i + 1]], pts[i + 1], limits)
-              for i in range(len(legs))]
-    first = 0  # each piece between two stops is its own problem: scaled alone, its peak meets the limits
-    for i in range(len(legs)):
-        if pts[i + 1].stop:
-            factor = max(ratios[first:i + 1]) * SAMPLING_MARGIN
-            for j in range(first, i + 1):
-                legs[j] = math.ceil(legs[j] * factor * 1000.0) / 1000.0  # whole ms, up: never over the limits
-            first = i + 1
+    seg = [at[i] + (1 if pts[i].hold_s > 0 else 0) for i in range(len(legs))]  # each leg's segment
+    _scale(legs, [_leg_ratio(ref, seg[i], pts[i + 1], limits) for i in range(len(legs))], pts)
     knots, at = _knots(pts, psi, legs)
+    yaw_max = math.radians(limits.MPC_YAWRAUTO_MAX)
+    free = [False] * len(knots)  # the guide knots (no item, not the start)
+    for i in range(1, len(pts)):
+        free[at[i]] = pts[i].items == ()
+    spread = spread_turns(knots, free, yaw_max)
+    psi = [float(spread[k]) for k in at]
+    knots, at = _knots(pts, psi, legs)
+    peaks = yaw_rate_peaks(*knot_arrays(knots))
+    if peaks.max() > yaw_max:  # a turn between knots that cannot move (stops, waypoints): slowed
+        _scale(legs, [float(peaks[j]) / yaw_max for j in seg], pts, over_only=True)
+        knots, at = _knots(pts, psi, legs)
     waypoints = tuple((label, at[i], p.stop) for i, p in enumerate(pts) for label in p.items)
     return Route(knots, waypoints, lands)
 

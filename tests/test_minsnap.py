@@ -1,7 +1,8 @@
 """Covers missions.minsnap: the minimum-snap polynomials pass through every knot, stop where asked, are C⁶
 (velocity to snap and beyond continuous) at pass-through knots, give analytic derivatives up to the 4th that
 match finite differences, minimise the snap integral against perturbed curves, and stretch exactly; the banded
-solver agrees with the dense solve it replaced, and 10 000 knots solve in tens of megabytes."""
+solver agrees with the dense solve it replaced, and 10 000 knots solve in tens of megabytes; the yaw flown is C²
+and monotone between knots (on plans: tests/test_route_yaw.py)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from missions.minsnap import ORDER, Knot, Smooth, demands, solve, stretched
+from missions.minsnap import ORDER, Knot, Smooth, demands, knot_arrays, solve, stretched, yaw_rate_peaks
 
 KNOTS = (Knot(0.0, 0.0, 0.0, 0.0, 0.0, True), Knot(3.0, 0.0, 0.0, 5.0, 0.0, True),
          Knot(7.0, 8.0, 1.0, 5.0, 0.5), Knot(10.0, 8.0, 9.0, 6.0, 1.5), Knot(14.0, 0.0, 9.0, 5.0, 2.5),
@@ -32,24 +33,46 @@ def test_passes_through_every_knot_and_rests_at_stops() -> None:
 
 @pytest.mark.parametrize("i", [2, 3, 4])
 def test_derivatives_continuous_at_pass_through_knots(i: int) -> None:
+    """The positions' derivatives 1-4; the yaw's 1-2, which the law uses (its 3rd and 4th are each quintic
+    piece's own: missions.minsnap's docstring)."""
     ref = Smooth(KNOTS)
     t = KNOTS[i].t
     before, after = ref.sample(t - 1e-9), ref.sample(t + 1e-9)
-    for a, b in zip(before, after):
-        for m in range(1, 5):
+    for axis, (a, b) in enumerate(zip(before, after)):
+        for m in range(1, 5 if axis < 3 else 3):
             assert a[m] == pytest.approx(b[m], rel=1e-5, abs=1e-5)
     assert math.hypot(after[0][1], after[1][1]) > 0.1  # it does pass through, not stop
+    assert i == 4 or after[3][1] > 0.05  # and turns through (KNOTS' yaw rises from knot 1 to 4, then holds)
 
 
 def test_derivatives_are_those_of_the_position() -> None:
+    """Each derivative is that of the one below (central differences); the yaw's 3rd and 4th away from the
+    knots, where its 2nd has a kink."""
     ref = Smooth(KNOTS)
     h = 1e-4
     for t in np.linspace(0.1, 19.9, 37):
+        near_knot = min(abs(t - k.t) for k in KNOTS) < 2 * h
         for m in range(4):
             lo, hi = ref.sample(t - h), ref.sample(t + h)
-            for axis in range(4):
+            for axis in range(3 if m >= 2 and near_knot else 4):
                 fd = (hi[axis][m] - lo[axis][m]) / (2 * h)
                 assert ref.sample(t)[axis][m + 1] == pytest.approx(fd, rel=1e-4, abs=1e-4)
+
+
+def test_the_yaw_is_monotone_between_knots_and_holds_a_value_two_knots_share() -> None:
+    """The yaw flown (missions.minsnap.yaw_pieces) never leaves the range of its segment's two knots (the
+    minimum-snap polynomial's went 0.005 rad past KNOTS' yaws, and off the 2.5 knots 4 and 5 share); its exact
+    peak rate (yaw_rate_peaks) bounds the sampled one. Fails on the minimum-snap yaw (and yaw_rate_peaks is new)."""
+    ref = Smooth(KNOTS)
+    peaks = yaw_rate_peaks(*knot_arrays(KNOTS))
+    for j, (a, b) in enumerate(zip(KNOTS, KNOTS[1:])):
+        lo, hi = min(a.psi, b.psi), max(a.psi, b.psi)
+        samples = [ref.sample(a.t + (b.t - a.t) * i / 500)[3] for i in range(1, 500)]
+        assert all(lo - 1e-12 <= p[0] <= hi + 1e-12 for p in samples), j
+        if a.psi == b.psi:
+            assert all(p[0] == a.psi and p[1] == 0.0 for p in samples), j
+        fastest = max(abs(p[1]) for p in samples)
+        assert peaks[j] * (1 - 1e-4) <= fastest <= peaks[j] * (1 + 1e-12), j
 
 
 def qp_minimum_snap(knots: tuple[Knot, ...], axis: int) -> np.ndarray:
