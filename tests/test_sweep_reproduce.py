@@ -49,3 +49,22 @@ def test_the_reports_command_flies_a_windy_fleets_first_row_again(tmp_path: Path
     assert again.returncode == 0, again.stderr
     summary = json.loads((tmp_path / "again" / "summary.json").read_text())
     assert repr(summary["rms_3d"]) == row["rms"] and len(summary["vehicles"]) == 2, (summary["rms_3d"], row)
+
+
+def test_the_reports_command_says_every_number_exactly_and_flies_the_row_to_the_last_bit(tmp_path: Path) -> None:
+    """A mission's wind from 123.4567891 deg and a swept delay of 12.3456789 ms: the command says both as given (``:g``
+    said ``--wind 3:123.457 --delay 12.3457``, another flight: its RMS not the row's), and flies the row again."""
+    (tmp_path / "brief.toml").write_text(BRIEF_WINDY.replace("270.0", "123.4567891"))
+    sweep = run_bsst("sweep", "brief.toml", "--wind", "3", "--delay", "12.3456789", "--jobs", "1", "--no-plots",
+                     "--out", "sw", cwd=tmp_path, timeout=240)
+    assert sweep.returncode == 0, sweep.stderr
+    with (tmp_path / "sw" / "cells.csv").open() as f:
+        row = next(csv.DictReader(f))
+    report = (tmp_path / "sw" / "report.md").read_text()
+    command = report.split("```sh\n", 1)[1].split("\n", 1)[0]
+    assert "--delay 12.3456789 " in command and "--wind 3:123.4567891 " in command, command
+    again = run_bsst(*shlex.split(command)[1:], "--no-plots", "--out", str(tmp_path / "again"), cwd=tmp_path / "sw",
+                     timeout=240)
+    assert again.returncode == 0, again.stderr
+    summary = json.loads((tmp_path / "again" / "summary.json").read_text())
+    assert repr(summary["rms_3d"]) == row["rms"], (summary["rms_3d"], row)

@@ -363,17 +363,23 @@ def jitter_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     return lines
 
 
+def exact(v: float) -> str:
+    """Its shortest exact text (``repr``; a whole one without ``.0``): ``:g`` said 123.457 for 123.4567891."""
+    f = float(v)
+    return f"{f:.0f}" if f.is_integer() and abs(f) < 1e15 else repr(f)
+
+
 def reproduce(row: Mapping[str, Any], swept: Sequence[str], wind_from_deg: float = 0.0) -> str:
     """The ``bsst sim`` command that flies one row again (a ``truth`` row without ``--noise``: it flies the same
     at any scale, and ``bsst sim`` refuses a noise that changes nothing; a row of a law without a super-twisting
     step without ``--discretization``, refused for the same reason). A swept wind keeps the mission's direction
     (``wind_from_deg``, its ``[wind] from_deg``: ``--wind S`` alone would blow from the north); a fleet's row is
-    its size in the sweep's formation."""
-    flags = [f"--controller {row['controller']}", f"--rate {row['rate_hz']:g}"]
-    flags += [f"--{SHORT[a]} {row[a]:g}" for a in LINK_AXES if a in swept]
+    its size in the sweep's formation. Every number is said exactly (:func:`exact`): the row to the last bit."""
+    flags = [f"--controller {row['controller']}", f"--rate {exact(row['rate_hz'])}"]
+    flags += [f"--{SHORT[a]} {exact(row[a])}" for a in LINK_AXES if a in swept]
     flags += [f"--estimator {row['estimator']}"] if "estimator" in swept else []
-    flags += [f"--noise {row['noise']:g}"] if "noise" in swept and row["estimator"] != "truth" else []
-    flags += [f"--wind {row['wind_mps']:g}:{wind_from_deg:g}"] if "wind_mps" in swept else []
+    flags += [f"--noise {exact(row['noise'])}"] if "noise" in swept and row["estimator"] != "truth" else []
+    flags += [f"--wind {exact(row['wind_mps'])}:{exact(wind_from_deg)}"] if "wind_mps" in swept else []
     flags += [f"--turbulence {row['turbulence']}"] if "turbulence" in swept else []
     flags += [f"--discretization {row['discretization']}"] if "discretization" in swept \
         and discretization_problem((row["controller"],)) is None else []  # bsst sim refuses it for smc, pid
