@@ -36,6 +36,7 @@ from typing import Any, NoReturn
 
 from bridge.core.interrupt import as_sigint
 from bridge.nodes.process import exit_text
+from bridge.nodes.report import BadInput, parse_line, to_line
 from params import ConfigError
 
 STOPS = (signal.SIGINT, signal.SIGTERM)  # passed on to the child as a Ctrl-C: its flight ends aborted, recorded
@@ -106,8 +107,8 @@ def run_watched(work: Callable[[], int], bad_input: tuple[type[BaseException], .
         os.close(r)
         os.close(asked_w)
     ended = _ended(b"".join(chunks))
-    if "bad_input" in ended:  # its refusal again, typed: said as it would have been here (a source "bsst sim" bare)
-        raise ConfigError(**ended["bad_input"])
+    if isinstance(ended.get("bad_input"), BadInput):  # its refusal again, typed: said as it would have been here
+        raise ended["bad_input"].error()
     if ended.get("interrupted"):
         raise KeyboardInterrupt
     if "status" in ended:
@@ -118,18 +119,17 @@ def run_watched(work: Callable[[], int], bad_input: tuple[type[BaseException], .
 
 def _ended(data: bytes) -> dict[str, Any]:
     """The child's end as it wrote it (:func:`_child`): ``{"status": N}``, ``{"interrupted": true}`` or ``{"bad_input":
-    {"text", "source", "key", "what"}}`` (``text`` as the message); ``{}`` when it wrote nothing whole (it ended before
-    its work did)."""
+    BadInput}`` (from its :class:`~bridge.nodes.report.BadInput` report, as a session's child writes it); ``{}`` when it
+    wrote nothing whole (it ended before its work did)."""
+    refused = parse_line(data.decode(errors="replace"))
+    if isinstance(refused, BadInput):
+        return {"bad_input": refused}
     try:
         ended = json.loads(data)
     except ValueError:
         return {}
     if not isinstance(ended, dict):
         return {}
-    if isinstance(ended.get("bad_input"), dict):
-        b = ended["bad_input"]
-        ended["bad_input"] = {"message": str(b.get("text", "")), "source": b.get("source"), "key": b.get("key"),
-                              "what": b.get("what")}
     return ended
 
 
@@ -154,17 +154,16 @@ def _take_passed_stops(asked: int, mask: set[signal.Signals]) -> None:
 def _child(work: Callable[[], int], bad_input: tuple[type[BaseException], ...], fd: int,
            asked: tuple[int, set[signal.Signals]] | None) -> NoReturn:
     """The child: the work, then its end to the parent as one JSON object (:func:`_ended`: its status; its bad input,
-    a :class:`~params.ConfigError`'s text and typed fields; or a Ctrl-C); ``asked``: the pipe of the stops the parent
+    its :class:`~bridge.nodes.report.BadInput` report's line; or a Ctrl-C); ``asked``: the pipe of the stops the parent
     passes on and the signal mask to put back (None: it passes none, this process takes its own)."""
-    report: dict[str, Any] = {"status": 1}
+    report: dict[str, Any] | str = {"status": 1}
     try:
         if asked is not None:
             _take_passed_stops(*asked)
         report = {"status": int(work())}
     except bad_input as exc:
         refused = exc if isinstance(exc, ConfigError) else ConfigError(str(exc))
-        report = {"bad_input": {"text": str(refused), "source": refused.source, "key": refused.key,
-                                "what": refused.what}}
+        report = to_line(BadInput.of(refused))  # the report a session's child writes (bridge.cli.main): one way
     except KeyboardInterrupt:
         report = {"interrupted": True}
     except BaseException:  # a fault of bsst's own: its traceback, as one process would show it; exit 1
@@ -175,6 +174,6 @@ def _child(work: Callable[[], int], bad_input: tuple[type[BaseException], ...], 
             sys.stderr.flush()
         except BaseException:  # (a closed stdout: the status stands)
             pass
-        os.write(fd, json.dumps(report).encode())
+        os.write(fd, (report if isinstance(report, str) else json.dumps(report)).encode())
         os._exit(0)
 
