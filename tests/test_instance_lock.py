@@ -65,9 +65,12 @@ def _flying(tmp_path: Path, mission: str) -> tuple[Proc, int]:
     for n in range(2, 10):
         p = Proc.bsst("sitl", mission, "--instance", str(n), "--speed", "1", "--out", str(tmp_path / f"a{n}"),
                       "--no-plots", cwd=ROOT)
-        if p.wait_line(lambda s: s.startswith((UP, "bsst: --instance")), timeout=120).startswith(UP):
+        said = p.wait_line(lambda s: s.startswith((UP, "bsst: --instance")), timeout=120)
+        if said.startswith(UP):
             return p, n
-        assert p.ended() == 2 and "in use" in p.lines[-1], p.lines[-5:]
+        # refused: its one line on stderr (bsst sitl's stdout is a person's, no reports), the last it says
+        held = f"bsst: --instance {n}: instance {n} is in use by another session (pid "
+        assert p.ended() == 2 and said.startswith(held) and p.lines[-1] == said, p.lines[-5:]
     raise AssertionError("no free instance from 2 to 9")
 
 

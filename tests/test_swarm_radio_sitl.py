@@ -20,9 +20,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bridge.cli.flags import refusal_line
 from bridge.cli.runreport import report_fleet
 from bridge.link.radio import make_radio_file
 from bridge.link.turns import TURNS
+from bridge.nodes.report import BadInput, parse_line
 from bridge.session.children import PORT_LOCKS
 from bridge.swarm import simulate, sitl
 from missions import MISSION_DIR
@@ -111,8 +113,11 @@ def test_a_relay_given_a_bad_radio_file_names_it_in_one_line_and_exits_2(tmp_pat
     extra = ["--radio-user", "0", "--mission", str(mission)] if what == "handover" else ["--radio-user", "2"]
     p = run_bsst("relay", "--listen", "127.0.0.1:0", "--to", "127.0.0.1:9", "--radio", str(f), "--bandwidth", "1000",
                  *extra, cwd=ROOT, env=ENV, timeout=60)
-    assert p.returncode == 2 and p.stdout == ""
     assert p.stderr.startswith(f"bsst: --radio {f}: ") and says in p.stderr and p.stderr.count("\n") == 1, p.stderr
+    # its stdout is reports (a session's child's, run by hand too): the refusal is its one line there, typed
+    reports = [parse_line(ln) for ln in p.stdout.splitlines()]
+    assert p.returncode == 2 and len(reports) == 1 and isinstance(reports[0], BadInput), p.stdout
+    assert refusal_line(reports[0].error()) == p.stderr.strip()
 
 
 # -- in lockstep: the offline fleet's radio, bit for bit (bridge.link.turns) ------------------------------------

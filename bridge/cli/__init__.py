@@ -2,8 +2,9 @@
 
 In:  argv (``sys.argv[1:]`` by default), and the mission, sweep and key files it names
 Out: the command's work and its summary on stdout; an exit status; bad input as one line
-     ``bsst: ...`` on stderr, and from a session's child (``bsst vehicle``, ``controller``, ``relay``) as its
-     ``bad_input`` report on stdout too (:class:`bridge.nodes.report.BadInput`: the session reads that, typed)
+     ``bsst: ...`` on stderr, and from a command whose stdout is its reports, a session's children (``bsst vehicle``,
+     ``controller``, ``relay``, as their parsers declare: bridge.cli.flags.REPORTS), as its ``bad_input`` report on
+     stdout too (:class:`bridge.nodes.report.BadInput`: the session reads that, typed)
 
 - :mod:`bridge.cli.flags`      flag types with their ranges
 - :mod:`bridge.cli.linkflags`  the link flags and their ``[link]`` overrides
@@ -38,7 +39,7 @@ from collections.abc import Sequence
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 from bridge.cli.commands import EXIT_BAD_INPUT, EXIT_FAILED, build_parser, print_summary
-from bridge.cli.flags import UsageError, as_config_error, refusal_line
+from bridge.cli.flags import UsageError, as_config_error, refusal_line, reports
 from bridge.cli.linkflags import link_table_from_args
 from params import ConfigError, input_scope
 
@@ -52,19 +53,10 @@ def _parser() -> argparse.ArgumentParser:
     return build_parser()
 
 
-REPORTING = ("vehicle", "controller", "relay")  # the commands whose stdout is reports (bridge.nodes.report)
-
-
-def _reports(argv: Sequence[str] | None) -> bool:
-    """Whether this command's stdout is a session child's reports (``bsst vehicle``, ``controller``, ``relay``: the
-    command line's first word, as a session gives it, bridge.session.commands): its refusal is one of them too."""
-    given = list(sys.argv[1:] if argv is None else argv)
-    return bool(given) and given[0] in REPORTING
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     own = threading.current_thread() is threading.main_thread() and argv is not None  # an in-process caller's
     handler = signal.getsignal(signal.SIGINT) if own else None
+    args = None
     try:
         args = _parser().parse_args(argv)  # (building it imports ~0.1 s: a Ctrl-C there is said below, not traced)
         with input_scope():  # the files this command reads: --overwrite never replaces one (params.inputs_read)
@@ -72,7 +64,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, ConfigError) as exc:  # a usage error's line opens with its command (bsst, bsst sim) already
         refused = as_config_error(exc)
         print(refusal_line(refused), file=sys.stderr)
-        if _reports(argv):  # a session's child: the refusal as a report too, the session's to read (not the line)
+        if reports(args, exc):  # a command whose stdout is reports (its parser says): the refusal is one too, the
+            # session's to read (never the line)
             from bridge.nodes.process import report_printer  # lazy: a refusal's only (the report's modules)
             from bridge.nodes.report import BadInput  # lazy: as above
 

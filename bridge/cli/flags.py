@@ -64,6 +64,15 @@ def refusal_line(exc: ConfigError) -> str:
 FLAG_CUTOFF = 0.75  # difflib's ratio from which a known flag is suggested (--dealy: --delay 0.86; --compensation
 # to bsst relay: --mission 0.70, not one to suggest)
 UNRECOGNIZED_IN = "_bsst_unrecognized_in"  # on the namespace: the (sub-)parser that met an unknown flag first
+# a command whose stdout is its reports (``bsst vehicle``, ``controller``, ``relay``: bridge.nodes.report, a session's
+# children), as its parser declares it (``add_parser(..., reports=True)``): on its namespace, and on a refusal raised
+# while its parser parsed; its refusal is then one of its reports too (bridge.cli.main: :func:`reports`)
+REPORTS = "_bsst_reports"
+
+
+def reports(*of: object) -> bool:
+    """Whether a command's namespace, or a refusal raised while its parser parsed, says its stdout is reports."""
+    return any(getattr(x, REPORTS, False) for x in of)
 
 
 # a word that starts with a minus and a number (a digit, a point and a digit, inf or nan) is a value, never a flag (no
@@ -77,9 +86,12 @@ CLASH = "not allowed with argument "  # argparse's words for two flags of a mutu
 
 
 class _Parser(argparse.ArgumentParser):
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, reports: bool = False, **kwargs: Any) -> None:
         kwargs.setdefault("exit_on_error", False)  # a bad value raises here, to be said in the house's words (refusal)
         super().__init__(*args, **kwargs)
+        self.reports = reports  # its command's stdout is reports (REPORTS)
+        if reports:
+            self.set_defaults(**{REPORTS: True})
         # argparse's own test of "a negative number, so a value" (an attribute of every parser and sub-parser since
         # Python 3.2; tests/test_cli.py pins what it does here)
         self._negative_number_matcher = VALUE_NOT_FLAG
@@ -94,7 +106,10 @@ class _Parser(argparse.ArgumentParser):
         try:
             ns, extras = super().parse_known_args(args, namespace)
         except argparse.ArgumentError as exc:
-            raise UsageError(*self.refusal(exc)) from None
+            raise self.marked(UsageError(*self.refusal(exc))) from None
+        except (UsageError, ConfigError) as exc:  # (its error(), or a sub-command's parser's)
+            self.marked(exc)
+            raise
         if any(a.startswith("-") for a in extras) and not hasattr(ns, UNRECOGNIZED_IN):
             setattr(ns, UNRECOGNIZED_IN, self)
         return ns, extras
@@ -105,8 +120,15 @@ class _Parser(argparse.ArgumentParser):
         ns, extras = self.parse_known_args(args, namespace)
         where = vars(ns).pop(UNRECOGNIZED_IN, self)
         if extras:
-            raise UsageError(where.prog, f"unrecognized arguments: {' '.join(extras)}{where.flag_hint(extras)}")
+            raise where.marked(UsageError(where.prog, f"unrecognized arguments: {' '.join(extras)}"
+                                                      f"{where.flag_hint(extras)}"))
         return ns
+
+    def marked(self, exc: Exception) -> Exception:
+        """``exc`` raised while this parser parsed: marked :data:`REPORTS` if its command's stdout is reports."""
+        if self.reports:
+            setattr(exc, REPORTS, True)
+        return exc
 
     def refusal(self, exc: argparse.ArgumentError) -> tuple[str, str]:
         """A bad value's line as bsst's own refusals read, as a UsageError's two parts (the command it opens with, the

@@ -140,7 +140,7 @@ def own_laws(args: argparse.Namespace, m: Any) -> list[str]:
 
 def add_sitl_commands(sub: Any) -> None:
     """``bsst vehicle``, ``bsst controller`` and ``bsst sitl``: the MAVLink SITL over UDP (bridge.session)."""
-    p = sub.add_parser("vehicle", help="the simulated vehicle alone: a MAVLink 2 endpoint over UDP")
+    p = sub.add_parser("vehicle", help="the simulated vehicle alone: a MAVLink 2 endpoint over UDP", reports=True)
     p.add_argument("mission", nargs="?", type=path_given("the mission"),
                    help="mission TOML for the start, effects, failsafe and rates (default: at rest at the origin, "
                         "250 Hz)")
@@ -173,7 +173,8 @@ def add_sitl_commands(sub: Any) -> None:
     p.add_argument("--overwrite", action="store_true", help="allow replacing those files")
     p.set_defaults(func=cmd_vehicle)
 
-    p = sub.add_parser("controller", help="the offboard controller alone: fly a mission against a MAVLink vehicle")
+    p = sub.add_parser("controller", help="the offboard controller alone: fly a mission against a MAVLink vehicle",
+                       reports=True)
     add_flight_options(p, vehicle=False)  # no failsafe of its own (the vehicle flies it), no run directory, no plots
     p.add_argument("--vehicle", metavar="HOST:PORT",
                    help="the vehicle's controller link (default 127.0.0.1:14560 + instance)")

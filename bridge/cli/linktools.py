@@ -173,7 +173,7 @@ def cmd_link_show(args: argparse.Namespace) -> int:
 
 def add_relay_command(sub: Any) -> None:
     """``bsst relay``: the real-time UDP relay applying the link model on the wall clock (bridge.nodes.relay)."""
-    p = sub.add_parser("relay", help="relay UDP both ways between two endpoints through the link model")
+    p = sub.add_parser("relay", help="relay UDP both ways between two endpoints through the link model", reports=True)
     p.add_argument("--listen", required=True, metavar="HOST:PORT", help="bind here; the controller sends here")
     p.add_argument("--to", required=True, metavar="HOST:PORT",
                    help="forward to here (the vehicle's link); only datagrams from exactly here go back")
