@@ -40,11 +40,12 @@ class ConfigError(ValueError):
         self.source, self.key, self.what = source, key, what
 
     @classmethod
-    def at(cls, source: str, key: str | None, what: str) -> ConfigError:
+    def at(cls, source: str, key: str | None, what: str, *, sep: str = ": ") -> ConfigError:
         """``source: key: what`` (``source: what`` without a key), with its fields; each shown escaped in the message
-        if it holds a newline or another unprintable character (every message is one line)."""
+        if it holds a newline or another unprintable character (every message is one line). ``sep``: what follows
+        ``source`` (a flag's range, ``" "``: ``--rate must be in [50, 1000], got 5``)."""
         where = f"{_printable(key, KEY_SHOWN_MAX)}: " if key else ""
-        return cls(f"{_printable(source)}: {where}{what}", source=source, key=key, what=what)
+        return cls(f"{_printable(source)}{sep}{where}{what}", source=source, key=key, what=what)
 
 
 MAX_TOML_BYTES = 4 << 20  # a mission, profile or sweep file is a few kB; anything this big is not one

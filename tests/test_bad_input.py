@@ -1204,7 +1204,7 @@ def test_a_value_that_starts_with_a_minus_and_a_digit_is_the_flags_value(files: 
         for value in ("-1", "-1:wind:3", "-33.9,151.2,20", "-.5:gps:off", "-inf", "-nan:gps:off"):
             try:
                 parser.parse_args([cmd, *map(str, BASE[cmd](files)), flag, value])
-            except UsageError as exc:
+            except (UsageError, ConfigError) as exc:  # (a flag type's refusal is a ConfigError, typed)
                 assert "expected one argument" not in str(exc) and flag in str(exc), (flag, value, str(exc))
     with pytest.raises(UsageError, match="--at: expected one argument"):  # a flag is still a flag
         parser.parse_args(["sim", "missions/sine.toml", "--at", "--no-plots"])
@@ -1330,3 +1330,37 @@ def test_a_fleet_given_a_bound_ground_station_address_is_refused_before_anything
     line = _refused(capsys, ["sitl", "missions/sine.toml", "--vehicles", 2, "--gcs", f"{form}127.0.0.1:31999",
                              "--no-plots", "--out", out], "--gcs")
     assert "fleet" in line and "udpout" in line and not out.exists(), line
+
+
+def test_every_flag_types_refusal_is_typed_the_flag_its_source(shared_files):
+    """Every flag whose type checks its value (bridge.cli's types), given the walk's bad values: the refusal is a
+    ConfigError whose ``source`` is the flag (with the value, for ``--param 'X=1': ...``) and ``what`` the bare reason,
+    its message ``source what`` or ``source: what`` as it always read. Until the third wave's forty-third session each
+    was a UsageError whose whole text was its ``what``, no source (``--rate 5``: source None)."""
+    from bridge.cli import _parser  # (the parser bsst's main parses with, built once)
+
+    typed = 0
+    for cmd, flag in _flag_cases():
+        action = next(a for a in _commands()[cmd]._actions if (a.option_strings[:1] or [a.dest]) == [flag])
+        if not action.option_strings or not getattr(action.type, "__module__", "").startswith("bridge.cli"):
+            continue
+        for bad in _bad_values(cmd, action, shared_files):
+            try:
+                _parser().parse_args([str(a) for a in (cmd, *BASE[cmd](shared_files), flag, bad)])
+            except ConfigError as e:
+                assert e.source is not None and e.source.split(" ")[0] in action.option_strings, (cmd, flag, bad, e)
+                assert str(e) in (f"{e.source} {e.what}", f"{e.source}: {e.what}") and e.key is None, (cmd, flag, e)
+                typed += 1
+            except UsageError as e:
+                raise AssertionError(f"bsst {cmd} {flag} {bad!r}: refused untyped: {e}") from None
+    assert typed > 100, typed
+
+
+def test_a_flags_range_refusal_says_the_flag_as_source_and_the_bare_reason(capsys):
+    with pytest.raises(ConfigError) as refused:
+        build_parser().parse_args(["sim", "missions/sine.toml", "--rate", "5"])
+    e = refused.value
+    assert (str(e), e.source, e.key, e.what) == ("--rate must be in [50, 1000], got 5", "--rate", None,
+                                                 "must be in [50, 1000], got 5")
+    assert main(["sim", "missions/sine.toml", "--rate", "5"]) == 2  # its line as it was
+    assert capsys.readouterr().err == "bsst: --rate must be in [50, 1000], got 5\n"

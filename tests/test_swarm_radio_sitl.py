@@ -118,6 +118,7 @@ def test_a_relay_given_a_bad_radio_file_names_it_in_one_line_and_exits_2(tmp_pat
     reports = [parse_line(ln) for ln in p.stdout.splitlines()]
     assert p.returncode == 2 and len(reports) == 1 and isinstance(reports[0], BadInput), p.stdout
     assert refusal_line(reports[0].error()) == p.stderr.strip()
+    assert reports[0].source == f"--radio {f}" and reports[0].key is None and says in reports[0].what  # typed: its flag
 
 
 # -- in lockstep: the offline fleet's radio, bit for bit (bridge.link.turns) ------------------------------------

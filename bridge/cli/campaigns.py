@@ -20,6 +20,7 @@ from typing import Any
 from bridge.cli.flags import (
     EXIT_FAILED,
     EXIT_OK,
+    FlagRefusal,
     UsageError,
     axis_values,
     int_in,
@@ -113,7 +114,7 @@ def fleet_sizes(text: str) -> tuple[int, ...]:
     lo, hi = RANGES["vehicles"]
     values = value_list("--vehicles", lo, hi)(text)
     if not all(v.is_integer() for v in values):
-        raise argparse.ArgumentTypeError(f"--vehicles: expected whole numbers of vehicles, got {text!r}")
+        raise FlagRefusal("--vehicles", f"expected whole numbers of vehicles, got {text!r}", sep=": ")
     return tuple(int(v) for v in values)
 
 

@@ -4,8 +4,8 @@ flags themselves, with the ``[link]`` overrides read back from them, are :mod:`b
 In:  command-line text (link values in ms, %, packets, bytes/s; ``--blackout START:DURATION`` s;
      ``--rate`` Hz; ``--speed`` x real time; ``--home`` degrees, degrees, m AMSL; ``--param NAME=VALUE``
      in the parameter's unit, an INT32's value an integer)
-Out: parsed values, each checked against its range (a bad one is a ``UsageError`` naming the flag:
-     exit 2); the exit statuses
+Out: parsed values, each checked against its range (a bad one is a :class:`~params.ConfigError` whose ``source``
+     is the flag and ``what`` the reason, :class:`FlagRefusal`: exit 2); the exit statuses
 
 The ranges are the mission loader's (:data:`bridge.link.model.NUMBER_RANGES`), one per key.
 """
@@ -35,6 +35,17 @@ class UsageError(Exception):
 
     def __reduce__(self) -> tuple[type[UsageError], tuple[str, str]]:
         return type(self), (self.command, self.what)  # (pickled whole: a process pool's)
+
+
+class FlagRefusal(argparse.ArgumentTypeError):
+    """A flag type's refusal, typed (:meth:`params.ConfigError.at`): ``source`` the flag (with the value it names, if
+    its message opens with both: ``--param 'X=1'``), ``what`` the bare reason; its message as it always read, ``flag
+    what`` (``--rate must be in [50, 1000], got 5``) or, ``sep=": "``, ``flag: what``. The parser raises
+    :attr:`refused` (:meth:`_Parser.parse_known_args`)."""
+
+    def __init__(self, flag: str, what: str, sep: str = " ") -> None:
+        self.refused = ConfigError.at(flag, None, what, sep=sep)
+        super().__init__(str(self.refused))
 
 
 def as_config_error(exc: UsageError | ConfigError) -> ConfigError:
@@ -106,6 +117,8 @@ class _Parser(argparse.ArgumentParser):
         try:
             ns, extras = super().parse_known_args(args, namespace)
         except argparse.ArgumentError as exc:
+            if isinstance(exc.__context__, FlagRefusal):  # a flag type's (the one place flags are checked): typed
+                raise self.marked(exc.__context__.refused) from None
             raise self.marked(UsageError(*self.refusal(exc))) from None
         except (UsageError, ConfigError) as exc:  # (its error(), or a sub-command's parser's)
             self.marked(exc)
@@ -169,7 +182,7 @@ def path_given(name: str) -> Callable[[str], str]:
     def conv(text: str) -> str:
         why = path_problem(text, "give one" if not name.startswith("-") else "give one, or leave the flag out")
         if why:
-            raise argparse.ArgumentTypeError(f"{name}: {why}")
+            raise FlagRefusal(name, why, sep=": ")
         return text
 
     return conv
@@ -180,9 +193,9 @@ def int_in(name: str, lo: int, hi: int) -> Callable[[str], int]:
         try:
             v = whole(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
+            raise FlagRefusal(name, f"must be an integer, got {text!r}") from None
         if not lo <= v <= hi:
-            raise argparse.ArgumentTypeError(f"{name} must be in [{lo}, {hi}], got {v}")
+            raise FlagRefusal(name, f"must be in [{lo}, {hi}], got {v}")
         return v
 
     return conv
@@ -198,9 +211,9 @@ def number_in(name: str, lo: float, hi: float, *, lo_open: bool = False,
         try:
             v = number(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be a number in {span}, got {text!r}") from None
+            raise FlagRefusal(name, f"must be a number in {span}, got {text!r}") from None
         if not (lo < v if lo_open else lo <= v) or not (v < hi if hi_open else v <= hi):  # also refuses nan
-            raise argparse.ArgumentTypeError(f"{name} must be in {span}, got {text}")
+            raise FlagRefusal(name, f"must be in {span}, got {text}")
         return v
 
     return conv
@@ -215,10 +228,10 @@ def pace_speed(flag: str) -> Callable[[str], float]:
         try:
             v = number(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{flag} must be a number, got {text!r}") from None
+            raise FlagRefusal(flag, f"must be a number, got {text!r}") from None
         why = speed_problem(v)
         if why:
-            raise argparse.ArgumentTypeError(f"{flag} {why}")
+            raise FlagRefusal(flag, why)
         return v
 
     return conv
@@ -231,12 +244,12 @@ def value_list(name: str, lo: float, hi: float) -> Callable[[str], tuple[float, 
         try:
             vals = tuple(number(x) for x in parts)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} takes numbers separated by commas, got {text!r}") from None
+            raise FlagRefusal(name, f"takes numbers separated by commas, got {text!r}") from None
         bad = [v for v in vals if not lo <= v <= hi]  # also catches nan
         if bad or not vals:
-            raise argparse.ArgumentTypeError(f"{name} values must be in [{lo:g}, {hi:g}], got {text}")
+            raise FlagRefusal(name, f"values must be in [{lo:g}, {hi:g}], got {text}")
         if len(set(vals)) != len(vals):
-            raise argparse.ArgumentTypeError(f"{name}: repeated value in {text}")
+            raise FlagRefusal(name, f"repeated value in {text}", sep=": ")
         return vals
 
     return conv
@@ -247,7 +260,7 @@ def name_list(name: str, choices: Sequence[str]) -> Callable[[str], tuple[str, .
         vals = tuple(x.strip() for x in text.split(","))
         bad = [v for v in vals if v not in choices]
         if bad or len(set(vals)) != len(vals):
-            raise argparse.ArgumentTypeError(f"{name} takes distinct names among {','.join(choices)}, got {text!r}")
+            raise FlagRefusal(name, f"takes distinct names among {','.join(choices)}, got {text!r}")
         return vals
 
     return conv
@@ -275,8 +288,8 @@ def blackout_window(name: str) -> Callable[[str], tuple[float, float]]:
         except ValueError:
             start = dur = float("nan")
         if not sep or not (s_lo <= start <= s_hi and d_lo < dur <= d_hi):
-            raise argparse.ArgumentTypeError(f"{name} must be START:DURATION in seconds (start in [{s_lo:g}, "
-                                             f"{s_hi:g}], duration in ({d_lo:g}, {d_hi:g}]), got {text!r}")
+            raise FlagRefusal(name, f"must be START:DURATION in seconds (start in [{s_lo:g}, "
+                                    f"{s_hi:g}], duration in ({d_lo:g}, {d_hi:g}]), got {text!r}")
         return start, dur
 
     return conv
@@ -290,7 +303,7 @@ def law_spec(flag: str) -> Callable[[str], str]:
 
         why = law_spec_problem(text)
         if why:
-            raise argparse.ArgumentTypeError(f"{flag} {why}")
+            raise FlagRefusal(flag, why)
         return text
 
     return conv
@@ -301,7 +314,7 @@ def law_list(flag: str) -> Callable[[str], tuple[str, ...]]:
     def conv(text: str) -> tuple[str, ...]:
         vals = tuple(x.strip() for x in text.split(","))
         if len(set(vals)) != len(vals):
-            raise argparse.ArgumentTypeError(f"{flag}: repeated law in {text!r}")
+            raise FlagRefusal(flag, f"repeated law in {text!r}", sep=": ")
         return tuple(law_spec(flag)(v) for v in vals)
 
     return conv
@@ -369,11 +382,11 @@ def param_assignment(flag: str, timed: bool = False) -> Callable[[str], Any]:
         try:
             got = parse_change(text) if timed else parse_assignment(text)
         except ConfigError as exc:
-            raise argparse.ArgumentTypeError(f"{flag} {quoted(text)}: {exc}") from None
+            raise FlagRefusal(f"{flag} {quoted(text)}", str(exc), sep=": ") from None
         name, value = (got.name, got.value) if timed else got
         why = value_problem(BY_NAME[name], value)
         if why:
-            raise argparse.ArgumentTypeError(f"{flag} {quoted(text)}: {why}")
+            raise FlagRefusal(f"{flag} {quoted(text)}", why, sep=": ")
         return got
 
     return conv
@@ -394,8 +407,8 @@ def sensor_set_name(flag: str) -> Callable[[str], str]:
     TOML bare key: letters, digits, ``_``, ``-``); whether the profile has it, when the flight is built."""
     def conv(text: str) -> str:
         if not text or not all(c.isascii() and (c.isalnum() or c in "_-") for c in text):
-            raise argparse.ArgumentTypeError(f"{flag} takes the name of a sensor set of the profile "
-                                             f"(ideal, mocap, gnss), got {text!r}")
+            raise FlagRefusal(flag, f"takes the name of a sensor set of the profile "
+                                    f"(ideal, mocap, gnss), got {text!r}")
         return text
 
     return conv
@@ -419,9 +432,9 @@ def existing_file(flag: str, text: str) -> str:
     p = Path(path_given(flag)(text)).expanduser()
     why = unreachable(p)
     if why:
-        raise argparse.ArgumentTypeError(f"{flag} {text}: cannot read ({why})")
+        raise FlagRefusal(f"{flag} {text}", f"cannot read ({why})", sep=": ")
     if not p.is_file():
-        raise argparse.ArgumentTypeError(f"{flag} {text}: {'is not a regular file' if p.exists() else 'no such file'}")
+        raise FlagRefusal(f"{flag} {text}", "is not a regular file" if p.exists() else "no such file", sep=": ")
     return str(p.absolute())
 
 
@@ -432,7 +445,7 @@ def yes_no(flag: str) -> Callable[[str], bool]:
     def conv(text: str) -> bool:
         v = words.get(text.strip().lower())
         if v is None:
-            raise argparse.ArgumentTypeError(f"{flag} takes true or false (or yes/no, on/off, 1/0), got {text!r}")
+            raise FlagRefusal(flag, f"takes true or false (or yes/no, on/off, 1/0), got {text!r}")
         return v
 
     return conv
@@ -445,7 +458,7 @@ def _ids(text: str) -> tuple[int, int]:
     except ValueError:
         ids = (-1, -1)
     if not sep or not (1 <= ids[0] <= 255 and 0 <= ids[1] <= 255):
-        raise argparse.ArgumentTypeError(f"--controller-id must be SYSID:COMPID (1-255:0-255), got {text!r}")
+        raise FlagRefusal("--controller-id", f"must be SYSID:COMPID (1-255:0-255), got {text!r}")
     return ids
 
 
@@ -453,9 +466,9 @@ def _home(text: str) -> tuple[float, float, float]:
     try:
         lat, lon, alt = (number(x) for x in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--home must be LAT,LON,ALT in degrees and metres, got {text!r}") from None
+        raise FlagRefusal("--home", f"must be LAT,LON,ALT in degrees and metres, got {text!r}") from None
     if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and -1000.0 <= alt <= 10000.0):
-        raise argparse.ArgumentTypeError(f"--home out of range (lat [-90, 90], lon [-180, 180], alt [-1000, 10000]), "
-                                         f"got {text!r}")
+        raise FlagRefusal("--home", f"out of range (lat [-90, 90], lon [-180, 180], alt [-1000, 10000]), "
+                                    f"got {text!r}")
     return lat, lon, alt
 

@@ -20,7 +20,15 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from bridge.cli.flags import UsageError, blackout_window, existing_file, link_number, link_seed, yes_no
+from bridge.cli.flags import (
+    FlagRefusal,
+    UsageError,
+    blackout_window,
+    existing_file,
+    link_number,
+    link_seed,
+    yes_no,
+)
 from params import ConfigError
 
 # -- link impairment flags (bridge.link.model): both directions, or one with --up-/--down- -----------
@@ -97,8 +105,8 @@ def link_profile(flag: str) -> Callable[[str], str]:
 
         if not is_profile_path(text):
             if text not in profile_names():
-                raise argparse.ArgumentTypeError(f"{flag}: unknown link profile {text!r}; shipped profiles: "
-                                                 f"{', '.join(profile_names())} (or a profile TOML path)")
+                raise FlagRefusal(flag, f"unknown link profile {text!r}; shipped profiles: "
+                                        f"{', '.join(profile_names())} (or a profile TOML path)", sep=": ")
             return text
         return existing_file(flag, text)
 

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from bridge.cli.flags import (
+    FlagRefusal,
     axis_values,
     int_in,
     law_spec,
@@ -292,12 +293,12 @@ def wind_flag(text: str) -> tuple[float, float]:
     try:
         values = (number(speed), number(frm) if sep else 0.0)  # "5:" is a FROM left out, refused
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--wind: expected SPEED[:FROM_DEG] (m/s, compass degrees), got {text!r}"
-                                         ) from None
+        raise FlagRefusal("--wind", f"expected SPEED[:FROM_DEG] (m/s, compass degrees), got {text!r}",
+                          sep=": ") from None
     (slo, shi, su), (flo, fhi, fu) = EVENT_RANGES["speed_mps"], EVENT_RANGES["from_deg"]
     if not (slo <= values[0] <= shi and flo <= values[1] <= fhi):
-        raise argparse.ArgumentTypeError(f"--wind: SPEED must be in [{slo:g}, {shi:g}] {su} and FROM_DEG in [{flo:g}, "
-                                         f"{fhi:g}] {fu}, got {text!r}")
+        raise FlagRefusal("--wind", f"SPEED must be in [{slo:g}, {shi:g}] {su} and FROM_DEG in [{flo:g}, "
+                                    f"{fhi:g}] {fu}, got {text!r}", sep=": ")
     return values
 
 

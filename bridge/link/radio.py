@@ -123,15 +123,15 @@ class RadioFile:
         try:
             fd = os.open(path, os.O_RDWR)
         except OSError as exc:
-            raise ConfigError(f"{flag} {path}: cannot open ({exc.strerror or exc})") from None
+            raise ConfigError.at(f"{flag} {path}", None, f"cannot open ({exc.strerror or exc})") from None
         try:
             size = os.fstat(fd).st_size
             head = os.pread(fd, _HEADER.size, 0)
             magic, users = _HEADER.unpack(head) if len(head) == _HEADER.size else (b"", 0)
             if magic != _MAGIC or size != radio_file_bytes(users):
-                raise ConfigError(f"{flag} {path}: not a radio file (its magic or size is wrong)")
+                raise ConfigError.at(f"{flag} {path}", None, "not a radio file (its magic or size is wrong)")
             if not 0 <= user < users:
-                raise ConfigError(f"{flag} {path}: no user {user} in it (users 0-{users - 1})")
+                raise ConfigError.at(f"{flag} {path}", None, f"no user {user} in it (users 0-{users - 1})")
             self.map = mmap.mmap(fd, size)
         except BaseException:
             os.close(fd)
