@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from bridge import simulate
+from bridge.autopilot.flightstart import flight_begun
 from bridge.core.flight import prepare
 from bridge.record.metrics import gps_outages
 from missions import load_mission
@@ -472,12 +473,15 @@ def test_a_real_time_plant_run_before_its_flight_is_disturbed_on_the_flights_tim
     assert late.plant.state == pytest.approx(offline.plant.state, abs=1e-9)
 
 
-def test_a_ground_stations_real_time_flight_flies_its_timeline_and_disturbance_from_its_arm() -> None:
-    """A real-time vehicle's plant runs 1.664 s on the ground, then a ground station arms it in TAKEOFF
-    (Commander: SimVehicle.start_mission_clock_now): flown by its own controller from there, its flight is the one
-    armed at the start, the robust mission's sine disturbance and a wind step at 0.2 s included, the wind said 0.2 s
-    into it; a controller's first target later (start_mission_clock) moves its time 0 no more. Until the forty-fourth
-    session such a flight held both for a target that never came (no wind, no disturbance)."""
+def test_a_ground_stations_real_time_flight_flies_its_timeline_and_disturbance_from_its_takeoff() -> None:
+    """A real-time vehicle's plant runs 1.664 s on the ground; a ground station arms it in HOLD there (nothing flies:
+    no time 0, flight_begun false for all 0.2 s of it, the wind at 0.2 s not said) and disarms it; 1 s later it
+    arms it in TAKEOFF, and the flight begins (Commander._ground_flight: flight_begun, then
+    SimVehicle.start_mission_clock_now): flown by its own controller from there, it is the flight armed at the start,
+    the robust mission's sine disturbance and a wind step at 0.2 s included, the wind said 0.2 s into it; a
+    controller's first target later (start_mission_clock) moves its time 0 no more. Until the forty-fourth session
+    such a flight held both for a target that never came; then (f546137) its clock started at the first arm, so the
+    arm in HOLD spent the wind on the ground (said 0.2 s after it) and the takeoff flew the sine 1.2 s late."""
     mission = load_mission(ROOT / "missions" / "robust.toml").with_overrides(
         duration_s=1.0, events=({"t_s": 0.2, "kind": "wind", "speed_mps": 3.0},))
     flight = prepare(mission)
@@ -485,10 +489,20 @@ def test_a_ground_stations_real_time_flight_flies_its_timeline_and_disturbance_f
     late.hold_timeline()
     for _ in range(416):  # disarmed on the ground until the ground station's arm
         late.advance()
-    k0 = 416
+    late.set_mode("hold")
+    late.arm_in_mode()
+    for _ in range(50):  # armed in HOLD on the ground: no flight
+        assert late.armed and not flight_begun(late)
+        late.advance()
+    late.disarm()
+    for _ in range(250):
+        late.advance()
+    assert late.mission_t0 is None and not [e for e in late.events if e.kind == "wind"]
+    k0 = 416 + 50 + 250
     for v in (offline, late):
         v.set_mode("takeoff")
         v.arm_in_mode()
+    assert flight_begun(late)
     late.start_mission_clock_now()
     late.start_mission_clock(k0 / mission.rate_hz + 0.1)  # a controller's first target, later: no change
     for _ in range(100):  # 0.4 s of the takeoff

@@ -1,12 +1,15 @@
-"""Covers bridge.nodes.vehicle.commander, bridge.autopilot.simvehicle and bridge.nodes.vehicle.verdict: a flight
-flown by a ground station alone flies the mission's timeline from its arm, and a vehicle stopped before an event
-says it never flew it.
+"""Covers bridge.nodes.vehicle.commander, bridge.autopilot.flightstart and bridge.nodes.vehicle.verdict: a flight
+flown by a ground station alone flies the mission's timeline from its takeoff (bridge.autopilot.simvehicle's clock;
+an arm that leaves the vehicle on the ground flies nothing), and a vehicle stopped before an event says it never
+flew it.
 
 A real ``bsst vehicle --realtime`` on 127.0.0.1 with no controller at all, flown by a pymavlink ground station as
 QGroundControl flies PX4: NAV_TAKEOFF, then an arm (armed in TAKEOFF, the vehicle's own controller flies). Its
 mission's ``[[events]]`` act at their time of that flight, counted from the arm's control step (docs/weather.md, "In
 real time"); until the forty-fourth session the real-time vehicle held its timeline (and its gusts and disturbance)
 until a controller's first target, which such a flight never sends: the events never acted and nothing said so.
+Then (f546137) its clock started at the first arm from a ground station, whatever came of it: an arm in HOLD on the
+ground, disarmed at once, spent the timeline on a vehicle that sat there.
 """
 
 from __future__ import annotations
@@ -20,8 +23,8 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.nodes.report import Event, Ready, parse_line
 from bridge.session import instance_slot
-from tests.sitlkit import ROOT, Proc
-from tests.test_vehicle import _ack, _controller_link, _gcs
+from tests.sitlkit import ROOT, Proc, controller_exit
+from tests.test_vehicle import HOLD, _ack, _controller_link, _gcs
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -62,7 +65,7 @@ def test_a_ground_stations_takeoff_flies_the_timeline_from_its_arm_and_says_what
             assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
             assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
-            wind = v.wait_event(lambda e: e.startswith("wind: "), timeout=30)
+            wind = v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
             v.p.send_signal(signal.SIGINT)
             status = v.p.wait(timeout=30)
         finally:
@@ -100,14 +103,121 @@ def test_a_flight_whose_time_0_never_came_says_its_timeline_was_never_flown(tmp_
             assert ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
             ctl.mav.command_long_send(n + 1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
             assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
-            v.wait_event(lambda e: e.startswith("disarmed: "), timeout=30)
+            v.wait_report(Event, lambda e: e.kind == "disarmed", timeout=30)
             v.p.send_signal(signal.SIGINT)
             status = v.p.wait(timeout=30)
         finally:
             ctl.close()
             v.stop()
     said = [ln for ln in v.lines if ln.startswith("bsst vehicle")]
-    never = "its flight's time 0 never came (no controller's target, no ground station's flight)"
+    never = ("its flight's time 0 never came (no controller's target, no ground station's takeoff: armed on the "
+             "ground, it never flew)")
     assert status == 1 and said[0].startswith("bsst vehicle: failsafe at t="), "\n".join(v.lines[-12:])
     assert said[1:] == [f"bsst vehicle: not reached: t=1.000 s: steady wind 2 m/s from 0 deg: {never}",
                         f"bsst vehicle: not reached: t=6.000 s: steady wind 4 m/s from 90 deg: {never}"], said
+
+
+# wind steps at 1 s and 2.5 s of a 3 s flight
+SHORT = (f'name = "gcsshort"\nduration_s = 3.0\nrate_hz = {RATE_HZ}\n[trajectory]\nkind = "sine"\namplitude = 0.0\n'
+         '[[events]]\nt_s = 1.0\nkind = "wind"\nspeed_mps = 2.0\n'
+         '[[events]]\nt_s = 2.5\nkind = "wind"\nspeed_mps = 4.0\nfrom_deg = 90.0\n')
+
+
+def _arm_in_hold_and_disarm(v: Proc, gcs: object) -> Event:
+    """The ground station selects HOLD and arms (armed in HOLD on the ground: nothing flies), then disarms at once,
+    and the vehicle's plant runs on 1.5 s after the arm; the vehicle's ``armed`` event."""
+    tgt = (gcs.target_system, gcs.target_component)  # type: ignore[attr-defined]
+    for command, params in ((M.MAV_CMD_DO_SET_MODE, HOLD), (M.MAV_CMD_COMPONENT_ARM_DISARM, (1,)),
+                            (M.MAV_CMD_COMPONENT_ARM_DISARM, (0,))):
+        gcs.mav.command_long_send(*tgt, command, 0, *params, *(0,) * (7 - len(params)))  # type: ignore[attr-defined]
+        assert _ack(gcs, command).result == M.MAV_RESULT_ACCEPTED
+    armed = v.wait_report(Event, lambda e: e.kind == "armed", timeout=30)
+    v.wait_report(Event, lambda e: e.kind == "disarmed", timeout=30)
+    assert armed.text == "armed, HOLD", armed
+    # then 1.5 s of the vehicle's time (its time_boot_ms: simulation time), past the 1 s event's time from the arm
+    later = f"ATTITUDE.time_boot_ms >= {round(armed.t * 1000) + 1500}"
+    assert gcs.recv_match(type="ATTITUDE", blocking=True, timeout=30, condition=later) is not None  # type: ignore
+    return armed
+
+
+def test_an_arm_on_the_ground_flies_nothing_a_controllers_flight_after_it_flies_the_timeline(tmp_path: Path) -> None:
+    """No controller at first: the ground station arms the vehicle in HOLD and disarms it at once (nothing flew);
+    1.5 s later a real ``bsst controller --realtime`` flies the 3 s mission. The wind events at 1 s and 2.5 s act
+    1 s and 2.5 s into the controller's flight (its first target, just after its arm), and both processes exit 0,
+    nothing said (the controller 1 for a stall of its ticks alone, on a loaded machine). On the old code (f546137)
+    the arm in HOLD started the clock: both winds acted while the vehicle sat disarmed (1.02 s and 2.52 s after the
+    vehicle's start), before the controller even armed, and nothing said so."""
+    mission = tmp_path / "gcsshort.toml"
+    mission.write_text(SHORT)
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), cwd=ROOT)
+        ctl = None
+        try:
+            v.wait_report(Ready, timeout=60)
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            _arm_in_hold_and_disarm(v, gcs)
+            ctl = Proc.bsst("controller", str(mission), "--realtime", "--instance", str(n), cwd=ROOT)
+            status = ctl.p.wait(timeout=90)
+            first = v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
+            v.wait_report(Event, lambda e: e.kind == "wind" and e.t > first.t, timeout=30)
+            v.p.send_signal(signal.SIGINT)
+            v_status = v.p.wait(timeout=30)
+        finally:
+            gcs.close()
+            if ctl is not None:
+                ctl.stop()
+            v.stop()
+    events = _events(v)
+    said = [ln for ln in v.lines if ln.startswith("bsst vehicle")]
+    armed = [e for e in events if e.kind == "armed"]
+    assert [e.text for e in armed] == ["armed, HOLD", "armed, offboard control"], armed
+    flown = armed[1].t  # the controller's arm; its first target, time 0, follows within a few periods
+    w1, w2 = [e for e in events if e.kind == "wind"]
+    assert (w1.text, w2.text) == ("steady wind 2 m/s from 0 deg", "steady wind 4 m/s from 90 deg")
+    # time 0 is the first target's state: after the arm, by the controller's first answers (2 to 6 periods here)
+    assert 1.0 - 1e-6 <= w1.t - flown < 2.0, (flown, w1.t)
+    assert w2.t - w1.t == pytest.approx(1.5, abs=1e-6), (w1.t, w2.t)
+    assert status == controller_exit(ctl.lines), "\n".join(ctl.lines[-12:])  # (1 for a stall of its ticks alone)
+    assert v_status == 0 and said == [], "\n".join(v.lines[-12:])
+
+
+def test_an_arm_in_hold_disarmed_then_a_takeoff_flies_the_timeline_from_the_takeoff(tmp_path: Path) -> None:
+    """The ground station arms the vehicle in HOLD on the ground and disarms it (nothing flew), and 1.5 s of the
+    vehicle's time after that arm takes off (NAV_TAKEOFF, then an arm: TAKEOFF): the wind event at 1 s acts 1 s into
+    that takeoff (within a control period of it), not 1 s after the arm in HOLD; stopped before the 6 s event, the
+    vehicle says that one never flew, exit 1. On the old code (f546137) the 1 s wind acted on the ground, 1 s after
+    the arm in HOLD, before the takeoff (the 6 s one then 4.5 s into the real flight; a review found it with 4 s)."""
+    mission = tmp_path / "gcswind.toml"
+    mission.write_text(WINDY)
+    period = 1.0 / RATE_HZ
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), cwd=ROOT)
+        try:
+            v.wait_report(Ready, timeout=60)
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            held = _arm_in_hold_and_disarm(v, gcs)
+            tgt = (gcs.target_system, gcs.target_component)
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
+            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            v.wait_report(Event, lambda e: e.kind == "armed" and e.t > held.t, timeout=30)
+            wind = v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
+            v.p.send_signal(signal.SIGINT)
+            status = v.p.wait(timeout=30)
+        finally:
+            gcs.close()
+            v.stop()
+    events = _events(v)
+    said = [ln for ln in v.lines if ln.startswith("bsst vehicle")]
+    armed = [e for e in events if e.kind == "armed"]
+    assert [e.text for e in armed] == ["armed, HOLD", "armed, TAKEOFF"], armed
+    takeoff = armed[1]
+    assert takeoff.t >= held.t + 1.5, (held.t, takeoff.t)
+    assert 1.0 - 1e-6 <= wind.t - takeoff.t < 1.0 + period + 1e-6, (held.t, takeoff.t, wind.t)
+    assert [e.text for e in events if e.kind == "wind"] == ["steady wind 2 m/s from 0 deg"]
+    assert status == 1 and len(said) == 1, v.lines[-5:]
+    assert said[0].startswith("bsst vehicle: not reached: t=6.000 s: steady wind 4 m/s from 90 deg: the vehicle "
+                              "stopped at t="), said

@@ -28,6 +28,7 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.autopilot.failsafe import PositionHold
 from bridge.autopilot.fencewatch import reposition_refusal
+from bridge.autopilot.flightstart import flight_begun
 from bridge.autopilot.intention import NOT_ARMABLE
 from bridge.autopilot.params import BY_NAME
 from bridge.autopilot.positionloss import taken_without_position
@@ -292,16 +293,18 @@ class Commander:
         self.sim.set_mode(mode, takeoff_alt_m, hold_at)
         attribute(self.sim.events, n0, by)
         self.clocking.after_mode(was)
-        if by.link == "gcs" and self.sim.armed and self.sim.mode in GROUND_MODES:
-            self._ground_flight()
         return mavlink.MAV_RESULT_ACCEPTED
 
     def _ground_flight(self) -> None:
-        """A ground station's flight, flown by the vehicle's own controller, is on: with no target yet (real time)
-        the mission's clock starts now (its timeline, gusts and disturbance: docs/weather.md), unless the flight of
-        record is a controller's (one pinned, ``--controller-from``, as bsst sitl's; a mission awaited): its first
-        target's state stays time 0, as the session's trace's."""
-        if not self.cfg.await_mission and self.cfg.controller_from is None:
+        """After a command or a control period: a flight flown by the vehicle's own controller (a ground station's
+        modes) has begun (:func:`~bridge.autopilot.flightstart.flight_begun`: a takeoff, or up; not an arm that
+        leaves it on the ground): with no target yet (real time) the mission's clock starts now (its timeline, gusts
+        and disturbance: docs/weather.md), unless the flight of record is a controller's (one pinned,
+        ``--controller-from``, as bsst sitl's; a mission awaited): its first target's state stays time 0, as the
+        session's trace's."""
+        cfg = self.cfg
+        if (self.sim.mission_t0 is None and not cfg.await_mission and cfg.controller_from is None
+                and flight_begun(self.sim)):
             self.sim.start_mission_clock_now()
 
     def _not_now(self, why: str) -> int:
@@ -378,7 +381,9 @@ class Commander:
 
     def _after_change(self) -> None:
         """After a command or a control period: the mode to take after disarming noted, and, disarmed in LAND, RTL or
-        the failsafe, taken (:mod:`.intention`: PX4's user mode intention, its failsafe cleared on disarm)."""
+        the failsafe, taken (:mod:`.intention`: PX4's user mode intention, its failsafe cleared on disarm); a flight
+        of the vehicle's own begun, the mission's clock started (:meth:`_ground_flight`)."""
+        self._ground_flight()
         self.intention.after_period()
 
     # -- arming ----------------------------------------------------------------------------------------
@@ -450,7 +455,6 @@ class Commander:
                     self.clocking.ground_takes_over(now)
                 if from_gcs:
                     self.pre_start.ground_armed(now)  # in HOLD on the ground: PX4's pre-takeoff timeout
-                    self._ground_flight()
                 return mavlink.MAV_RESULT_ACCEPTED
             if not was_offboard:
                 self.ports.new_flight(from_gcs)  # no target of the last flight is in force

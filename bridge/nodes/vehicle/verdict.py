@@ -10,8 +10,9 @@ Out: :func:`flights_not_ended_well`: one line each for a flight the plant ended 
 
 :func:`timeline_not_reached`: one line each for an event of the mission's timeline (``[[events]]``, a ``[wind]``
 gust) never acted on by a vehicle that flew (armed at least once): the vehicle was stopped before its time, or its
-flight's time 0 never came (real time: no controller's target, no ground station's flight); any one makes the exit
-status 1 too, as ``summary.json``'s ``ended_by.not_reached`` is said by ``bsst sitl``
+flight's time 0 never came (real time: no controller's target, no ground station's takeoff; an arm that left it on
+the ground, in HOLD or LAND, flies nothing: :mod:`bridge.autopilot.flightstart`); any one makes the exit status 1
+too, as ``summary.json``'s ``ended_by.not_reached`` is said by ``bsst sitl``
 
 ``bsst controller`` alone says what went wrong as far as it knows (bridge.nodes.offboard.run); the vehicle alone,
 stopped (Ctrl-C, SIGTERM), says what its own flights came to. A clean stop of a vehicle whose flights ended well (or
@@ -52,6 +53,7 @@ def timeline_not_reached(sim: SimVehicle) -> list[str]:
     if not any(e.kind == "armed" for e in sim.events):
         return []
     t0 = sim.mission_t0
-    why = ("its flight's time 0 never came (no controller's target, no ground station's flight)" if t0 is None
+    why = ("its flight's time 0 never came (no controller's target, no ground station's takeoff: armed on the "
+           "ground, it never flew)" if t0 is None
            else f"the vehicle stopped at t={sim.t - t0:.3f} s of its flight's time")
     return [f"not reached: {late}: {why}" for late in sim.not_reached()]
