@@ -1,4 +1,4 @@
-"""Covers plant.events and bridge.autopilot.simvehicle: the timeline of events.
+"""Covers plant.events, bridge.autopilot.simvehicle and bridge.autopilot.flightstart: the timeline of events.
 
 Motor faults, sensor faults, weather changes; honest outcomes (crashed, diverged after a fault) and the CLI's
 ``--at`` (docs/weather.md)."""
@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from bridge import simulate
-from bridge.autopilot.flightstart import flight_begun
+from bridge.autopilot.failsafe import PositionHold
+from bridge.autopilot.flightstart import AIRBORNE_M, flight_begun
 from bridge.core.flight import prepare
 from bridge.record.metrics import gps_outages
 from missions import load_mission
@@ -513,3 +514,27 @@ def test_a_ground_stations_real_time_flight_flies_its_timeline_and_disturbance_f
     [(t_off, said)] = [(e.t, e.text) for e in offline.events if e.kind == "wind"]
     assert [(e.t - k0 / mission.rate_hz, e.text) for e in late.events if e.kind == "wind"] == [
         (pytest.approx(t_off, abs=1e-9), said)]
+
+
+def test_a_flight_of_the_vehicles_own_begins_when_it_is_sent_up_not_at_an_arm_on_the_ground() -> None:
+    """flight_begun: armed in HOLD on the ground, no flight, even for an EKF vehicle (gnss set) whose HOLD holds its
+    estimate's start height and creeps the plant up ~0.3 m (under AIRBORNE_M, and its target, given at the arm, not
+    above the estimate then); a DO_REPOSITION's HOLD to 2 m from there is one at once (the command that sends it up,
+    before its lift-off), as is TAKEOFF; disarmed, none."""
+    sine = load_mission(ROOT / "missions" / "sine.toml").with_overrides(duration_s=1.0)
+    for mission in (sine, sine.with_overrides(sensors={"set": "gnss"}, estimator={"kind": "ekf"})):
+        v = prepare(mission).make_vehicle()
+        v.set_mode("hold")
+        v.arm_in_mode()
+        assert not flight_begun(v, engaged=True)
+        for _ in range(500):
+            assert v.armed and not flight_begun(v), v.plant.state[4]
+            v.advance()
+        assert v.plant.state[4] < AIRBORNE_M
+        v.set_mode("hold", hold_at=PositionHold(0.0, 0.0, 2.0))
+        assert flight_begun(v, engaged=True) and v.plant.state[4] < AIRBORNE_M
+        v.disarm()
+        assert not flight_begun(v)
+        v.set_mode("takeoff")
+        v.arm_in_mode()
+        assert flight_begun(v)

@@ -2,12 +2,13 @@
 mission clock's start when no controller's target starts it (docs/weather.md, "A flight flown by a ground station
 alone").
 
-In:  the simulated vehicle (armed, its mode, its on-board controller's target: m, paper frame; its true height and
-     its start's, m)
+In:  the simulated vehicle (armed, its mode, its on-board controller's target: m, paper frame; its published
+     height, its true height and its start's, m)
 Out: :func:`flight_begun`: True once the vehicle, armed in a mode its own controller flies (HOLD, LAND, TAKEOFF,
-     RTL), is sent up or is up: TAKEOFF; HOLD or RTL to a point more than :data:`AIRBORNE_M` above its start (a
-     DO_REPOSITION, a return's climb); or more than :data:`AIRBORNE_M` above its start (any of them, in the air).
-     False for an arm that leaves it on the ground (HOLD where it stands, LAND), or disarmed
+     RTL), is sent up or is up: TAKEOFF; with ``engaged`` (just as a ground station's command gave the mode its
+     target) HOLD or RTL to a point more than :data:`CLIMB_M` above where it knows itself to be (a DO_REPOSITION, a
+     return's climb); in any of them, more than :data:`AIRBORNE_M` above its start. False for an arm that leaves it
+     on the ground (HOLD where it stands, LAND), or disarmed
 
 As PX4: an arm is not a flight. PX4 stamps a flight's takeoff (vehicle_status.takeoff_time) when its land detector
 sees it leave the ground, and disarms a vehicle armed and left on the ground (COM_DISARM_PRFLT) as one that never
@@ -21,18 +22,21 @@ from bridge.autopilot.failsafe import PositionHold, ReturnHome
 from bridge.autopilot.modes import GROUND_MODES, TAKEOFF
 from bridge.autopilot.simvehicle import SimVehicle
 
-# m above the start: off the ground for good, not the creep of a HOLD on the ground that holds an estimate's
-# height (the EKF's start, gnss set: up to ~0.19 m)
-AIRBORNE_M = 0.3
+CLIMB_M = 0.3  # m: a target this far above the vehicle's published height sends it up (DO_REPOSITION: >= 0.5 m)
+# m above the start: up for good, beyond the creep of a HOLD armed on the ground that holds its estimate's start
+# height (an EKF's, gnss set: up to 0.32 m seen), which flies nothing it was asked to
+AIRBORNE_M = 1.0
 
 
-def flight_begun(sim: SimVehicle) -> bool:
-    """Whether ``sim`` flies a flight of its own controller now (the module docstring)."""
+def flight_begun(sim: SimVehicle, engaged: bool = False) -> bool:
+    """Whether ``sim`` flies a flight of its own controller now (the module docstring); ``engaged``: its mode's
+    target was given just now (compared with the estimate then: the creep's estimate drifts from a HOLD's later)."""
     if not sim.armed or sim.mode not in GROUND_MODES:
         return False
     if sim.mode == TAKEOFF:
         return True
-    ground = sim.home[2]  # the start's height (m)
     target = sim.onboard.target
     up = target.z if isinstance(target, PositionHold) else target.z_return if isinstance(target, ReturnHome) else None
-    return sim.plant.state[4] - ground > AIRBORNE_M or (up is not None and up - ground > AIRBORNE_M)
+    if engaged and up is not None and up - sim.published()[4] > CLIMB_M:
+        return True
+    return sim.plant.state[4] - sim.home[2] > AIRBORNE_M  # (home: the start, m)

@@ -293,18 +293,19 @@ class Commander:
         self.sim.set_mode(mode, takeoff_alt_m, hold_at)
         attribute(self.sim.events, n0, by)
         self.clocking.after_mode(was)
+        self._ground_flight(engaged=True)
         return mavlink.MAV_RESULT_ACCEPTED
 
-    def _ground_flight(self) -> None:
+    def _ground_flight(self, engaged: bool = False) -> None:
         """After a command or a control period: a flight flown by the vehicle's own controller (a ground station's
-        modes) has begun (:func:`~bridge.autopilot.flightstart.flight_begun`: a takeoff, or up; not an arm that
-        leaves it on the ground): with no target yet (real time) the mission's clock starts now (its timeline, gusts
-        and disturbance: docs/weather.md), unless the flight of record is a controller's (one pinned,
-        ``--controller-from``, as bsst sitl's; a mission awaited): its first target's state stays time 0, as the
-        session's trace's."""
+        modes) has begun (:func:`~bridge.autopilot.flightstart.flight_begun`: a takeoff, or up; ``engaged``: a mode
+        just given, sent up; not an arm that leaves it on the ground): with no target yet (real time) the mission's
+        clock starts now (its timeline, gusts and disturbance: docs/weather.md), unless the flight of record is a
+        controller's (one pinned, ``--controller-from``, as bsst sitl's; a mission awaited): its first target's
+        state stays time 0, as the session's trace's."""
         cfg = self.cfg
         if (self.sim.mission_t0 is None and not cfg.await_mission and cfg.controller_from is None
-                and flight_begun(self.sim)):
+                and flight_begun(self.sim, engaged)):
             self.sim.start_mission_clock_now()
 
     def _not_now(self, why: str) -> int:
