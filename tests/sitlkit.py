@@ -31,6 +31,7 @@ from bridge.nodes.forkserver import ForkedChild, start_child
 from bridge.nodes.process import die_with_parent
 from bridge.nodes.report import Event, Report, parse_line
 from bridge.record.policies import stalls_of
+from tests.gcsfork import start_script
 from tests.waiting import wait_for
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -59,11 +60,15 @@ class Bsst:
     the tests make of it (``pid``, ``poll``, ``wait``, ``send_signal``, ``kill``, ``returncode``,
     ``communicate``), its stdout and stderr each a text pipe (``stdout``, ``stderr``), discarded (``False``), or
     stderr into stdout's pipe (``stderr="stdout"``, as ``subprocess.STDOUT``); ``env``: this process's environment
-    unless given; ``input``: its stdin (default: empty). It is its own process group (``os.killpg(p.pid, ...)``)."""
+    unless given; ``input``: its stdin (default: empty), or ``stdin``, a descriptor. It is its own process group
+    (``os.killpg(p.pid, ...)``)."""
+
+    PREFIX = BSST  # what the command line shows before ARGS
 
     def __init__(self, *args: str | Path, cwd: Path = ROOT, env: dict[str, str] | None = None,
-                 stdout: bool = True, stderr: bool | Literal["stdout"] = True, input: str | None = None) -> None:
-        self.args = [*BSST, *map(str, args)]
+                 stdout: bool = True, stderr: bool | Literal["stdout"] = True, input: str | None = None,
+                 stdin: int | None = None) -> None:
+        self.args = [*self.PREFIX, *map(str, args)]
         out = os.pipe() if stdout else None
         err = os.pipe() if stderr is True else None
         with open(os.devnull, "wb") as null, tempfile.TemporaryFile() as given:
@@ -72,8 +77,8 @@ class Bsst:
             out_fd = null.fileno() if out is None else out[1]
             err_fd = out_fd if stderr == "stdout" else null.fileno() if err is None else err[1]
             try:
-                self.p = start_child(self.args[len(BSST):], out_fd, err_fd, stdin=given.fileno(), cwd=str(cwd),
-                                     env=env)
+                self.p = self._start(self.args[len(self.PREFIX):], out_fd, err_fd,
+                                     given.fileno() if stdin is None else stdin, str(cwd), env)
             finally:
                 for e in (out, err):
                     if e is not None:
@@ -81,6 +86,10 @@ class Bsst:
         self.stdout, self.stderr = (None if e is None else open(e[0], encoding="utf-8", errors="replace")
                                     for e in (out, err))
         self.pid = self.p.pid
+
+    def _start(self, args: list[str], out: int, err: int, given: int, cwd: str,
+               env: dict[str, str] | None) -> ForkedChild | subprocess.Popen[bytes]:
+        return start_child(args, out, err, stdin=given, cwd=cwd, env=env)
 
     @property
     def returncode(self) -> int | None:
@@ -125,6 +134,36 @@ class Bsst:
             if f is not None:
                 f.close()
         return self._texts.get(0, ""), self._texts.get(1, "")
+
+
+class Script(Bsst):
+    """``python ARGS`` (a ground station: ``-c SCRIPT ...`` or ``FILE ...``) as :class:`Bsst` runs ``bsst``, forked
+    warm by the test kit's own fork server (tests/gcsfork.py: pymavlink, MAVProxy and MAVSDK imported once); ``cwd``:
+    this process's unless given, as ``subprocess`` has it."""
+
+    PREFIX = [sys.executable]
+
+    def __init__(self, *args: str | Path, cwd: Path | None = None, **kw: Any) -> None:
+        super().__init__(*args, cwd=Path.cwd() if cwd is None else cwd, **kw)
+
+    def _start(self, args: list[str], out: int, err: int, given: int, cwd: str,
+               env: dict[str, str] | None) -> ForkedChild | subprocess.Popen[bytes]:
+        return start_script(args, out, err, stdin=given, cwd=cwd, env=env)
+
+
+def run_script(*args: str | Path, cwd: Path | None = None, env: dict[str, str] | None = None, timeout: float = 300.0,
+               input: str | None = None) -> subprocess.CompletedProcess[str]:
+    """``python ARGS`` run to its end, as ``subprocess.run([sys.executable, *ARGS], capture_output=True, text=True,
+    ...)`` gives it: forked warm (:class:`Script`); ``subprocess.TimeoutExpired`` after ``timeout`` s, the script
+    killed."""
+    p = Script(*args, cwd=cwd, env=env, input=input)
+    try:
+        out, err = p.communicate(timeout)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.wait()
+        raise
+    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
 
 
 def pool_workers(group: int) -> list[int]:
@@ -181,11 +220,22 @@ class Proc:
     """A child process whose stdout is read line by line without blocking."""
 
     def __init__(self, argv: list[str], cwd: Path | None = None, stdin: int | None = subprocess.DEVNULL,
-                 bsst: bool = False) -> None:
+                 bsst: bool = False, warm: bool = False) -> None:
+        """``bsst``: ``argv`` is ``bsst``'s (:data:`BSST` ...), forked warm as a session's children are; ``warm``:
+        ``argv`` is a ground station's (``sys.executable`` ...), forked warm too (:class:`Script`), its stdin a pipe
+        of its own (``self.stdin``) with ``stdin=subprocess.PIPE``; else exec'd (docs/testing.md)."""
         self.argv = argv
         self.p: subprocess.Popen[bytes] | ForkedChild
-        if bsst:  # forked warm by the fork server, as a session's children are (docs/testing.md)
-            forked = Bsst(*argv[len(BSST):], cwd=cwd or Path.cwd(), env=ENV, stderr="stdout")
+        self.stdin: Any = None
+        if bsst or warm:
+            piped = os.pipe() if warm and stdin == subprocess.PIPE else None
+            if bsst:
+                forked: Bsst = Bsst(*argv[len(BSST):], cwd=cwd or Path.cwd(), env=ENV, stderr="stdout")
+            else:
+                forked = Script(*argv[1:], cwd=cwd, env=ENV, stderr="stdout", stdin=piped and piped[0])
+            if piped is not None:
+                os.close(piped[0])
+                self.stdin = open(piped[1], "wb")  # noqa: SIM115  (held as Popen's stdin is)
             self.p = forked.p
             self._out = forked.stdout  # (held: closing it would close the pipe)
             self.fd = forked.stdout.fileno()  # type: ignore[union-attr]
@@ -195,6 +245,7 @@ class Proc:
             self.p = subprocess.Popen(argv, cwd=cwd, stdin=stdin, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                                       env=ENV, start_new_session=True, preexec_fn=die_with_parent)
             self.fd = self.p.stdout.fileno()  # type: ignore[union-attr]
+            self.stdin = self.p.stdin
         os.set_blocking(self.fd, False)
         self._buf = b""
         self.lines: list[str] = []
@@ -283,13 +334,14 @@ class MavProxy(Proc):
 
     def __init__(self, master: str, cwd: Path) -> None:
         mavproxy = os.path.join(os.path.dirname(sys.executable), "mavproxy.py")
-        super().__init__([sys.executable, mavproxy, f"--master={master}", "--nowait"], cwd=cwd, stdin=subprocess.PIPE)
+        super().__init__([sys.executable, mavproxy, f"--master={master}", "--nowait"], cwd=cwd, stdin=subprocess.PIPE,
+                         warm=True)
 
     def say(self, cmd: str) -> int:
         """Type ``cmd``; the index of the first line that can answer it."""
         mark = len(self.lines)
-        self.p.stdin.write(cmd.encode() + b"\n")  # type: ignore[union-attr]
-        self.p.stdin.flush()  # type: ignore[union-attr]
+        self.stdin.write(cmd.encode() + b"\n")
+        self.stdin.flush()
         return mark
 
     def wait_online(self, timeout: float = 30.0) -> str:
@@ -303,7 +355,7 @@ class MavProxy(Proc):
         sets the flag its main thread reads between lines of stdin: blocked reading the next, it never looked (a
         SIGTERM within ~50 ms of a typed line, before the line was read, ended it; one later, 5 s to the SIGKILL)."""
         with contextlib.suppress(OSError):  # (BrokenPipeError: it has ended already)
-            self.p.stdin.close()  # type: ignore[union-attr]
+            self.stdin.close()
         with contextlib.suppress(subprocess.TimeoutExpired):
             self.p.wait(timeout=timeout)
         return super().stop(timeout)

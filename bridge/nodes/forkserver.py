@@ -135,12 +135,13 @@ class _Server:
         self.gone = False
 
     @classmethod
-    def start(cls) -> _Server:
-        """A server process of this process's own."""
+    def start(cls, module: str = SERVER_MODULE) -> _Server:
+        """A server process of this process's own: ``python -m MODULE FD PADDING`` (the test kit runs one of its
+        own for its ground-station scripts, tests/gcsfork.py)."""
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         try:
             proc = subprocess.Popen(
-                [sys.executable, "-m", SERVER_MODULE, str(theirs.fileno()), " " * TITLE_ROOM],
+                [sys.executable, "-m", module, str(theirs.fileno()), " " * TITLE_ROOM],
                 pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                 start_new_session=True)  # its stderr is ours: it says numba's cache-off note where it compiles first
         except BaseException:
