@@ -40,7 +40,6 @@ import re
 import selectors
 import signal
 import socket
-import subprocess
 import sys
 import threading
 import time
@@ -57,7 +56,7 @@ from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID
 from bridge.mavlink.kerneldrops import udp_table_row
 from bridge.record.halves import count_records, read_half
 from bridge.session import instance_slot
-from tests.sitlkit import Proc
+from tests.sitlkit import Proc, run_script
 from tests.waiting import wait_for
 
 MIN_STEP = 10  # the stale targets are for step 0: fuzz only once the vehicle is past this step
@@ -311,8 +310,8 @@ def check_tlogs(paths: list[Path]) -> list[int]:
     stops at the first that fails); the messages it printed of each."""
     if not paths:
         return []
-    r = subprocess.run([sys.executable, "-c", _DUMP_EACH, str(MAVLOGDUMP), _DUMPED, *map(str, paths)],
-                       capture_output=True, text=True, timeout=120, env={**os.environ, "MAVLINK20": "1"})
+    r = run_script("-c", _DUMP_EACH, str(MAVLOGDUMP), _DUMPED, *map(str, paths), timeout=120,
+                   env={**os.environ, "MAVLINK20": "1"})  # forked warm (tests/gcsfork.py)
     assert r.returncode == 0, f"mavlogdump {paths}: {r.stderr[-500:]}"
     *each, rest = r.stdout.split(_DUMPED + "\n")
     assert len(each) == len(paths) and rest == "", f"mavlogdump {paths}: {r.stdout[-500:]}"

@@ -18,8 +18,6 @@ import math
 import os
 import signal
 import socket
-import subprocess
-import sys
 from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
@@ -65,6 +63,7 @@ from tests.sitlkit import (
     Proc,
     clean_exit,
     run_bsst,
+    run_script,
     script_result,
     tlog_messages,
 )
@@ -148,8 +147,8 @@ def _mavsdk_flies(n: int, plan: Path, out: Path, status: int, *extra: str, sitl_
     sitl = Proc.bsst("sitl", "--await-mission", "--speed", "0", "--instance", str(n), "--out", str(out), "--no-plots",
                      *sitl_args)
     try:
-        r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}", str(plan),
-                            "240", *extra], capture_output=True, text=True, timeout=300, env=ENV)
+        r = run_script("-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}", str(plan), "240", *extra, timeout=300,
+                       env=ENV)
         said = script_result(r)
         assert sitl.p.wait(timeout=120) == status, "\n".join(sitl.lines[-30:])
         return said
@@ -311,8 +310,7 @@ def _mavsdk_against_await_mission(script: str, out: Path) -> dict[str, Any]:
     with instance_slot() as n:
         sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots")
         try:
-            r = subprocess.run([sys.executable, "-c", script, f"udpin://127.0.0.1:{GCS_PORT + n}"],
-                               capture_output=True, text=True, timeout=120, env=ENV)
+            r = run_script("-c", script, f"udpin://127.0.0.1:{GCS_PORT + n}", timeout=120, env=ENV)
         finally:
             sitl.stop()
     return script_result(r)
@@ -1501,8 +1499,8 @@ def _hop_then_mission(out: Path, then: str, *sitl_args: str, hop: str = "land") 
     with instance_slot() as n:
         sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots", *sitl_args)
         try:
-            r = subprocess.run([sys.executable, "-c", MAVSDK_HOP_THEN_MISSION, f"udpin://127.0.0.1:{GCS_PORT + n}",
-                                then, hop], capture_output=True, text=True, timeout=300, env=ENV)
+            r = run_script("-c", MAVSDK_HOP_THEN_MISSION, f"udpin://127.0.0.1:{GCS_PORT + n}", then, hop, timeout=300,
+                           env=ENV)
             gs = script_result(r)
             assert gs["up"] and gs["down"] and {gs["arm"], gs["land"], gs["upload"], gs["start"]} == {"SUCCESS"}, gs
             assert gs.get("finished") or gs.get("pause") == "SUCCESS", gs
@@ -1653,8 +1651,7 @@ def test_a_crash_of_a_ground_stations_flight_before_an_awaited_mission_ends_the_
         sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--out", str(out), "--no-plots",
                          "--speed", "0", "--param", "MPC_LAND_SPEED=3")
         try:
-            r = subprocess.run([sys.executable, "-c", MAVSDK_HOP_CRASH, f"udpin://127.0.0.1:{GCS_PORT + n}"],
-                               capture_output=True, text=True, timeout=120, env=ENV)
+            r = run_script("-c", MAVSDK_HOP_CRASH, f"udpin://127.0.0.1:{GCS_PORT + n}", timeout=120, env=ENV)
             gs = script_result(r)
             assert gs["up"] and gs["down"] and {gs["arm"], gs["takeoff"], gs["land"]} == {"SUCCESS"}, gs
             status = sitl.p.wait(timeout=60)  # by itself: nothing stops it

@@ -35,6 +35,7 @@ from bridge.mavlink.signing import Signing
 from bridge.mavlink.spinner import CORES, runnable_tasks
 from params import ConfigError
 from tests.hostile import packed_requests, udp_queue
+from tests.sitlkit import run_script
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -289,9 +290,8 @@ def test_tlog_holds_both_directions_and_mavlogdump_reads_it(tmp_path):
         types.append(m.get_type())
         assert 0 < m._timestamp - time.time() + 60 < 120  # a wall-clock stamp of just now
     assert types == ["HEARTBEAT", "ODOMETRY", "SET_ACTUATOR_CONTROL_TARGET"]  # received, sent, received
-    dump = subprocess.run([sys.executable, os.path.join(os.path.dirname(sys.executable), "mavlogdump.py"),
-                           str(tmp_path / "b.tlog")], capture_output=True, text=True, timeout=60,
-                          env={**os.environ, "MAVLINK20": "1"})
+    dump = run_script(os.path.join(os.path.dirname(sys.executable), "mavlogdump.py"), str(tmp_path / "b.tlog"),
+                      timeout=60, env={**os.environ, "MAVLINK20": "1"})
     assert dump.returncode == 0, dump.stderr
     assert "ODOMETRY" in dump.stdout and "SET_ACTUATOR_CONTROL_TARGET" in dump.stdout and "HEARTBEAT" in dump.stdout
 

@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import math
 import re
-import subprocess
-import sys
 import time
 from collections import Counter
 from collections.abc import Callable
@@ -35,7 +33,7 @@ from bridge.nodes.vehicle.reposition import UNSET_INT
 from bridge.session import instance_slot
 from missions import MISSION_DIR, Mission, Sine
 from missions.geodetic import Home
-from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc, script_result, shown
+from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc, run_script, script_result, shown
 from tests.test_vehicle import _ack, _gcs, _vehicle
 from tests.waiting import wait_for
 
@@ -265,8 +263,7 @@ sdk.destroy()
 def _mavsdk(n: int, part: str, script: str = MAVSDK_SCRIPT) -> dict:
     """Run the MAVSDK ``script``'s ``part`` (in its own process: the native library keeps threads of its
     own) against the vehicle of instance ``n``; its RESULT."""
-    r = subprocess.run([sys.executable, "-c", script, f"udpin://127.0.0.1:{GCS_PORT + n}", part],
-                       capture_output=True, text=True, timeout=120, env=ENV)
+    r = run_script("-c", script, f"udpin://127.0.0.1:{GCS_PORT + n}", part, timeout=120, env=ENV)
     return script_result(r)
 
 

@@ -11,8 +11,6 @@ real time) with pymavlink and with MAVSDK (one ``System`` per vehicle) over UDP 
 from __future__ import annotations
 
 import socket
-import subprocess
-import sys
 import threading
 from pathlib import Path
 from typing import Any
@@ -25,7 +23,7 @@ from bridge.mavlink.endpoint import GCS_PORT
 from bridge.nodes.vehicle.streams import VehicleView, message
 from bridge.session import instance_slot
 from bridge.swarm import sitl
-from tests.sitlkit import ENV, MAVSDK_GROUND_STATION, script_result
+from tests.sitlkit import ENV, MAVSDK_GROUND_STATION, run_script, script_result
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
@@ -207,8 +205,7 @@ def test_mavsdk_reads_each_fleet_vehicle_about_its_own_start(tmp_path: Path) -> 
     with instance_slot() as n:
         flight, result = _fly(tmp_path, GCS_PORT + n, False, 6.0)
         try:
-            r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}"],
-                               capture_output=True, text=True, timeout=240, env=ENV)
+            r = run_script("-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}", timeout=240, env=ENV)
         finally:
             flight.join(240)
     out = script_result(r)

@@ -17,8 +17,6 @@ import copy
 import json
 import math
 import os
-import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -38,7 +36,7 @@ from bridge.nodes.vehicle.mission import REACHED_REPEATS, REACHED_S
 from bridge.nodes.vehicle.missiontransfer import PROTOCOL_TIMEOUT_S, RETRY_S
 from bridge.session import instance_slot
 from missions import Mission, Sine
-from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc, script_result
+from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc, run_script, script_result
 from tests.test_vehicle import _vehicle
 from tests.waiting import wait_for
 
@@ -613,8 +611,7 @@ sdk.destroy()
 
 def _mavsdk(url: str, part: str, arg: str, timeout: float = 120.0) -> dict:
     """The MAVSDK script's ``part`` in its own process (the native library keeps threads of its own)."""
-    r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, url, part, arg], capture_output=True, text=True,
-                       timeout=timeout, env=ENV)
+    r = run_script("-c", MAVSDK_SCRIPT, url, part, arg, timeout=timeout, env=ENV)
     return script_result(r)
 
 

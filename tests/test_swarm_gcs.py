@@ -13,8 +13,6 @@ broadcasts.
 from __future__ import annotations
 
 import socket
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -29,7 +27,7 @@ from bridge.nodes.vehicle.config import VehicleConfig
 from bridge.session.children import free_udp_port
 from bridge.swarm import sitl
 from missions import MISSION_DIR
-from tests.sitlkit import ENV, MAVSDK_GROUND_STATION, script_result, tlog_messages
+from tests.sitlkit import ENV, MAVSDK_GROUND_STATION, run_script, script_result, tlog_messages
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
@@ -209,8 +207,7 @@ def test_mavsdk_sees_four_systems_on_one_port_reads_each_and_kills_only_system_3
     port = free_udp_port()
     flight, result = _fly_fleet(tmp_path, port, 8.0)
     try:
-        r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{port}"], capture_output=True,
-                           text=True, timeout=240, env=ENV)
+        r = run_script("-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{port}", timeout=240, env=ENV)
     finally:
         flight.join(240)
     out = script_result(r)

@@ -16,8 +16,6 @@ standing where it was stopped: separation held, nothing said).
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import threading
 from pathlib import Path
 from typing import Any
@@ -28,7 +26,7 @@ from bridge.cli.runreport import report_fleet
 from bridge.record.separation import CONTINUED, WALL_CLOCK
 from bridge.session.children import free_udp_port
 from bridge.swarm import FleetRun, simulate, sitl
-from tests.sitlkit import ENV, MAVSDK_GROUND_STATION, script_result
+from tests.sitlkit import ENV, MAVSDK_GROUND_STATION, run_script, script_result
 
 pytestmark = pytest.mark.process  # starts processes, opens sockets
 
@@ -131,8 +129,7 @@ def _taken_off(tmp_path: Path, realtime: bool) -> tuple[dict[str, Any], Path]:
     port = free_udp_port()
     flight, result, mission = _fly(tmp_path, port, realtime=realtime)
     try:
-        r = subprocess.run([sys.executable, "-c", MAVSDK_TAKEOFF, f"udpin://127.0.0.1:{port}"], capture_output=True,
-                           text=True, timeout=240, env=ENV)
+        r = run_script("-c", MAVSDK_TAKEOFF, f"udpin://127.0.0.1:{port}", timeout=240, env=ENV)
     finally:
         flight.join(240)
     out = script_result(r)

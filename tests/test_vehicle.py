@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import math
 import os
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -29,7 +27,7 @@ from bridge.mavlink.receive import MAX_FRAME
 from bridge.nodes.report import Event, Ready, Stats
 from bridge.record.halves import read_half
 from bridge.session import instance_slot
-from tests.sitlkit import ENV, ROOT, MavProxy, Proc, run_bsst, script_result, shown
+from tests.sitlkit import ENV, ROOT, MavProxy, Proc, run_bsst, run_script, script_result, shown
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -499,8 +497,7 @@ def test_mavsdk_finds_reads_arms_disarms(tmp_path):
     with instance_slot() as n:
         v = _vehicle(n, tmp_path)
         try:
-            r = subprocess.run([sys.executable, "-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}"],
-                               capture_output=True, text=True, timeout=120, env=ENV)
+            r = run_script("-c", MAVSDK_SCRIPT, f"udpin://127.0.0.1:{GCS_PORT + n}", timeout=120, env=ENV)
         finally:
             assert v.stop() == 0
     out = script_result(r)
