@@ -24,6 +24,7 @@ from pymavlink.dialects.v20 import common as mavlink
 from bridge.nodes.report import Event, Ready, parse_line
 from bridge.session import instance_slot
 from tests.sitlkit import ROOT, Proc, controller_exit
+from tests.test_inject import _inject
 from tests.test_vehicle import HOLD, _ack, _controller_link, _gcs
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -221,3 +222,42 @@ def test_an_arm_in_hold_disarmed_then_a_takeoff_flies_the_timeline_from_the_take
     assert status == 1 and len(said) == 1, v.lines[-5:]
     assert said[0].startswith("bsst vehicle: not reached: t=6.000 s: steady wind 4 m/s from 90 deg: the vehicle "
                               "stopped at t="), said
+
+
+def test_a_flight_its_plant_ended_says_its_timeline_was_cut_there_not_at_the_stop(tmp_path: Path) -> None:
+    """A ground station's flight of an x500 (NAV_TAKEOFF, arm) whose motors it turns off (MAV_CMD_INJECT_FAILURE,
+    all motors, once the wind at 1 s has blown): the plant ends the flight (it crashes, or diverges first) and is
+    stepped no more. Stopped after (Ctrl-C), the vehicle says the event at 6 s was never flown because its plant ended
+    the flight, at that end's time of its flight: until this test it said ``the vehicle stopped at t=…`` with the
+    end's time, as if the user had stopped it there (a MAVSDK tour: ``diverged at t=8.080 s``, then ``not reached:
+    t=15.000 s: …: the vehicle stopped at t=2.040 s of its flight's time``, the process stopped seconds later)."""
+    mission = tmp_path / "gcswind.toml"
+    mission.write_text(WINDY)
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), "--profile", "x500",
+                      "--param", "SYS_FAILURE_EN=1", cwd=ROOT)
+        try:
+            v.wait_report(Ready, timeout=60)
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            tgt = (gcs.target_system, gcs.target_component)
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
+            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            v.wait_event(lambda e: e.startswith("wind: "), timeout=30)
+            assert _inject(gcs, M.FAILURE_UNIT_SYSTEM_MOTOR, M.FAILURE_TYPE_OFF, 0) == M.MAV_RESULT_ACCEPTED
+            end = v.wait_event(lambda e: e.startswith(("crashed: ", "diverged: ")), timeout=30)
+            v.p.send_signal(signal.SIGINT)
+            status = v.p.wait(timeout=30)
+        finally:
+            gcs.close()
+            v.stop()
+    armed = next(e for e in _events(v) if e.kind == "armed")
+    said = [ln for ln in v.lines if ln.startswith("bsst vehicle")]
+    assert status == 1 and said[0].startswith(f"bsst vehicle: {end.kind} at t={end.t:.3f} s"), said
+    head, tail = ("bsst vehicle: not reached: t=6.000 s: steady wind 4 m/s from 90 deg: its plant ended the flight "
+                  "at t=", f" s of its flight's time ({end.kind} at t={end.t:.3f} s)")
+    assert len(said) == 2 and said[1].startswith(head) and said[1].endswith(tail), said
+    flown = float(said[1][len(head):-len(tail)])  # the end's time of the flight: time 0 is a step at or after the arm
+    assert end.t - armed.t - 1.0 / RATE_HZ - 2e-3 <= flown <= end.t - armed.t + 2e-3, (armed.t, end.t, flown)

@@ -9,10 +9,11 @@ Out: :func:`flights_not_ended_well`: one line each for a flight the plant ended 
      outcomes; any one makes the exit status 1
 
 :func:`timeline_not_reached`: one line each for an event of the mission's timeline (``[[events]]``, a ``[wind]``
-gust) never acted on by a vehicle that flew (armed at least once): the vehicle was stopped before its time, or its
-flight's time 0 never came (real time: no controller's target, no ground station's takeoff; an arm that left it on
-the ground, in HOLD or LAND, flies nothing: :mod:`bridge.autopilot.flightstart`); any one makes the exit status 1
-too, as ``summary.json``'s ``ended_by.not_reached`` is said by ``bsst sitl``
+gust) never acted on by a vehicle that flew (armed at least once): the vehicle was stopped before its time, its plant
+ended the flight before it (crashed, diverged, a collision: the time of that end, not of the stop, which may come
+minutes later), or its flight's time 0 never came (real time: no controller's target, no ground station's takeoff; an
+arm that left it on the ground, in HOLD or LAND, flies nothing: :mod:`bridge.autopilot.flightstart`); any one makes
+the exit status 1 too, as ``summary.json``'s ``ended_by.not_reached`` is said by ``bsst sitl``
 
 ``bsst controller`` alone says what went wrong as far as it knows (bridge.nodes.offboard.run); the vehicle alone,
 stopped (Ctrl-C, SIGTERM), says what its own flights came to. A clean stop of a vehicle whose flights ended well (or
@@ -27,6 +28,7 @@ from bridge.autopilot.simvehicle import SimVehicle
 from bridge.autopilot.vehicleevents import Event
 
 PLANT_ENDS = ("crashed", "diverged", "collision", "terminated")  # the flight's end, its plant's (or motors cut)
+HALTS = ("crashed", "diverged", "collision")  # the plant is stepped no more after these (its clock halted)
 
 
 def flights_not_ended_well(events: Iterable[Event]) -> list[str]:
@@ -53,7 +55,12 @@ def timeline_not_reached(sim: SimVehicle) -> list[str]:
     if not any(e.kind == "armed" for e in sim.events):
         return []
     t0 = sim.mission_t0
-    why = ("its flight's time 0 never came (no controller's target, no ground station's takeoff: armed on the "
-           "ground, it never flew)" if t0 is None
-           else f"the vehicle stopped at t={sim.t - t0:.3f} s of its flight's time")
+    end = next((e for e in sim.events if e.kind in HALTS), None)  # its plant ended the flight: no event acts after
+    if t0 is None:
+        why = ("its flight's time 0 never came (no controller's target, no ground station's takeoff: armed on the "
+               "ground, it never flew)")
+    elif end is not None:
+        why = f"its plant ended the flight at t={end.t - t0:.3f} s of its flight's time ({end.kind} at t={end.t:.3f} s)"
+    else:
+        why = f"the vehicle stopped at t={sim.t - t0:.3f} s of its flight's time"
     return [f"not reached: {late}: {why}" for late in sim.not_reached()]
