@@ -17,6 +17,7 @@ import pytest
 from pymavlink.dialects.v20 import common as M
 
 from bridge.autopilot.failsafe import Land, Level, PositionHold, ReturnHome, Takeoff
+from bridge.autopilot.modes import TERMINATION
 from bridge.core.flight import prepare
 from bridge.mavlink import telemetry as tm
 from bridge.nodes.vehicle.streams import (
@@ -124,3 +125,18 @@ def test_the_landed_state_says_taking_off_and_landing_as_px4s() -> None:
     climbing, held = (_view(X, target=Takeoff(0.0, 0.0, 3.0), mode=m) for m in ("takeoff", "hold"))
     assert landed_state(climbing) == M.MAV_LANDED_STATE_TAKEOFF
     assert landed_state(held) == M.MAV_LANDED_STATE_IN_AIR  # at its height, holding there
+
+
+def test_a_vehicle_disarmed_in_the_air_is_landed_as_px4s_land_detector_says_but_a_terminated_one() -> None:
+    """PX4's multicopter land detector calls a vehicle not armed landed, wherever it is (``_get_landed_state``: "When
+    not armed, consider to be landed"): EXTENDED_SYS_STATE ON_GROUND for a vehicle disarmed 2 m up (a forced disarm,
+    the ``disarm`` failsafe, a flight its plant ended: found on a MAVSDK tour, an x500 whose motor 1 the Failure
+    plugin turned off said IN_AIR, disarmed, until the vehicle was stopped). A terminated flight, which PX4 keeps
+    armed with its outputs off (here shown disarmed), is in the air as it falls. Fails on the code before (IN_AIR)."""
+    X = (0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # 2 m up
+    for target, mode in ((None, "offboard"), (Level(0.5), "failsafe"), (PositionHold(0.0, 0.0, 2.0), "hold")):
+        view = _view(X, armed=False, omega=(0.0,) * 4, target=target, mode=mode)
+        assert landed_state(view) == M.MAV_LANDED_STATE_ON_GROUND, mode
+        assert _sent(M.MAVLINK_MSG_ID_EXTENDED_SYS_STATE, view).landed_state == M.MAV_LANDED_STATE_ON_GROUND
+    falling = _view(X, armed=False, omega=(0.0,) * 4, mode=TERMINATION)
+    assert landed_state(falling) == M.MAV_LANDED_STATE_IN_AIR

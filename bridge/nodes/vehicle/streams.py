@@ -99,8 +99,11 @@ def battery_status(v: VehicleView) -> list[Any]:
 def landed_state(v: VehicleView) -> int:
     """EXTENDED_SYS_STATE's landed state, as PX4 tells it: on the ground; off it, taking off or landing while the
     vehicle's own controller flies a takeoff or a landing (TAKEOFF; LAND, the failsafe's land or descend, Return's
-    last phase), else in the air (offboard control, HOLD, Return on its way)."""
-    if v.on_ground:
+    last phase), else in the air (offboard control, HOLD, Return on its way). Disarmed it is on the ground wherever it
+    is, as PX4's multicopter land detector says ("When not armed, consider to be landed",
+    ``MulticopterLandDetector::_get_landed_state``): a forced disarm in the air, the ``disarm`` failsafe's fall, a
+    flight its plant ended; but for a terminated flight, which PX4 keeps armed, its outputs forced off, as it falls."""
+    if v.on_ground or not v.armed and v.mode != TERMINATION:
         return mavlink.MAV_LANDED_STATE_ON_GROUND
     if isinstance(v.target, Takeoff) and v.mode == TAKEOFF:  # (once at its height it holds there: HOLD)
         return mavlink.MAV_LANDED_STATE_TAKEOFF
