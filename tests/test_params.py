@@ -243,10 +243,15 @@ def test_parameter_protocol_over_udp(tmp_path):
             for name, value, kind, code, why in (
                     ("COM_OF_LOSS_T", 100.0, M.MAV_PARAM_TYPE_REAL32, M.MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE,
                      "COM_OF_LOSS_T: must be in [0.01, 60] s, got 100"),
-                    ("COM_OF_LOSS_T", 1.0, M.MAV_PARAM_TYPE_INT32, MAV_PARAM_ERROR_TYPE_MISMATCH, "REAL32"),
+                    # the type a set says is named (it said "the set says type 6", a bare number; a STATUSTEXT's
+                    # first chunk, 50 characters, is what is matched)
+                    ("COM_OF_LOSS_T", 1.0, M.MAV_PARAM_TYPE_INT32, MAV_PARAM_ERROR_TYPE_MISMATCH,
+                     "is REAL32, the set says INT32 (type"),
                     # a type no parameter here has: PX4 main's TYPE_UNSUPPORTED (it was TYPE_MISMATCH)
                     ("COM_OF_LOSS_T", 1.0, M.MAV_PARAM_TYPE_REAL64, MAV_PARAM_ERROR_TYPE_UNSUPPORTED,
-                     "INT32 or REAL32"),
+                     "the set says REAL64 (type 10): the"),
+                    ("COM_OF_LOSS_T", 1.0, 42, MAV_PARAM_ERROR_TYPE_UNSUPPORTED,
+                     "the set says type 42, not a MAV_PAR"),
                     ("MAV_SYS_ID", param_to_wire(42, 6), 6, M.MAV_PARAM_ERROR_READ_ONLY, "at start only")):
                 gcs.mav.param_set_send(*tgt, name.encode(), value, kind)
                 error = _recv(gcs, ["PARAM_ERROR", "PARAM_VALUE"])
@@ -282,7 +287,7 @@ def test_parameter_protocol_over_udp(tmp_path):
     assert (e.param.name, e.param.new, e.by.link) == ("COM_OF_LOSS_T", 1.5, "gcs")  # typed, for the policies
     v.wait_event(lambda s: "param: COM_OBL_RC_ACT = 5 (was -1)" in s)
     stats = v.wait_report(Stats).values
-    assert stats["rejected"]["param_refused"] == 4 and stats["rejected"]["param_unknown"] == 4
+    assert stats["rejected"]["param_refused"] == 5 and stats["rejected"]["param_unknown"] == 4
 
 
 @pytest.mark.parametrize("link", ["link", "gcs"])

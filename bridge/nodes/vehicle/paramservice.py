@@ -114,10 +114,10 @@ class ParamService:
         want = PARAM_TYPES[spec.kind]
         try:
             if m.param_type not in PARAM_TYPES.values():  # PX4 main: TYPE_UNSUPPORTED for any but INT32, REAL32
-                raise ParamRefused(name, f"the set says type {m.param_type}: the parameters here are INT32 or "
-                                   "REAL32", Refusal.TYPE_UNSUPPORTED)
+                raise ParamRefused(name, f"the set says {_type_named(m.param_type)}: the parameters here are INT32 "
+                                   "or REAL32", Refusal.TYPE_UNSUPPORTED)
             if m.param_type != want:
-                raise ParamRefused(name, f"is {spec.kind}, the set says type {m.param_type}", Refusal.TYPE)
+                raise ParamRefused(name, f"is {spec.kind}, the set says {_type_named(m.param_type)}", Refusal.TYPE)
             changed = self.sim.change_param(name, param_from_wire(m.param_value, want), self.sysid)
             if changed is not None:  # its sender, typed: the session records who changed what, and when
                 changed.by = self.authority.sender(m, addr, link)
@@ -137,6 +137,15 @@ class ParamService:
         self._reject("param_unknown")
         error = _param_error(m, name, index, mavlink.MAV_PARAM_ERROR_DOES_NOT_EXIST)
         ep.reply((error, *self._texts(mavlink.MAV_SEVERITY_WARNING, f"param {what}: no such parameter")), addr)
+
+
+def _type_named(kind: int) -> str:
+    """A PARAM_SET's ``param_type`` for its refusal: ``INT32 (type 6)``; a number MAV_PARAM_TYPE does not have, as
+    such (``type 42, not a MAV_PARAM_TYPE``). Until the forty-fourth session's tour the number alone (``type 6``)."""
+    entry = mavlink.enums["MAV_PARAM_TYPE"].get(kind)
+    if entry is None or entry.name.endswith("_ENUM_END"):
+        return f"type {kind}, not a MAV_PARAM_TYPE"
+    return f"{entry.name.removeprefix('MAV_PARAM_TYPE_')} (type {kind})"
 
 
 def _param_error(m: Any, name: str, index: int, code: int) -> Any:
