@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
+from pymavlink.dialects.v20 import common as M
 
 from bridge.autopilot.modes import OFFBOARD
 from bridge.autopilot.vehicleevents import Event
@@ -26,6 +27,8 @@ from bridge.nodes.vehicle.verdict import flights_not_ended_well
 from bridge.record.halves import read_half
 from bridge.session import instance_slot
 from tests.sitlkit import ENV, ROOT, Proc, controller_exit, run_bsst
+from tests.test_await_mission import _small_plan_items, _upload, _vehicle_of
+from tests.test_vehicle import _ack, _gcs
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -174,3 +177,29 @@ def test_a_failsafe_the_flight_came_back_from_is_no_end_a_plant_end_always_is() 
     assert flights_not_ended_well([crash, Event(5.0, "failsafe", "x")]) == [
         "crashed at t=3.000 s: touched down at 3.1 m/s", "failsafe at t=5.000 s: x: its flight ended in it (no arm, no "
         "mode selected, took it back)"]
+
+
+def test_a_vehicle_alone_whose_started_mission_no_controller_flew_says_so_and_exits_1() -> None:
+    """``bsst vehicle --await-mission`` alone, no controller: a pymavlink ground station uploads a takeoff, a
+    waypoint and a landing and starts them (MAV_CMD_MISSION_START, ACCEPTED: the vehicle waits for its controller to
+    download and fly them). Stopped (Ctrl-C), it says the started mission was never flown and exits 1. Until the
+    forty-fourth session's tour (MAVSDK: MissionRaw upload, start_mission, Action.arm, all SUCCESS, nothing flown) it
+    said nothing and exited 0."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        vehicle = Proc.bsst("vehicle", "--await-mission", "--realtime", "--instance", str(n), cwd=ROOT)
+        try:
+            vehicle.wait_report(Ready, timeout=60)
+            target = _vehicle_of(gcs)
+            _upload(gcs, target, _small_plan_items())
+            gcs.mav.command_long_send(*target, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_MISSION_START).result == M.MAV_RESULT_ACCEPTED
+            vehicle.wait_event(lambda e: e.startswith("mission: start requested by MISSION_START"), timeout=30)
+            status, said = _stopped(vehicle)
+        finally:
+            gcs.close()
+            vehicle.stop()
+    assert status == 1 and len(said) == 1, vehicle.lines[-5:]
+    assert said[0].startswith("bsst vehicle: not flown: the mission started by MISSION_START [by 255:190 "), said
+    assert said[0].endswith(" gcs] was never flown: no controller took it up (bsst controller --await-mission flies "
+                            "it; bsst sitl --await-mission runs both)"), said

@@ -2,8 +2,9 @@
 
 In:  the flight (mission, profile, parameters), the vehicle's configuration, a run directory (or none)
 Out: its reports on stdout (JSON lines, :mod:`bridge.nodes.report`); on stderr, one line each for a flight that did
-     not end well and for a timeline event it never flew (:mod:`.verdict`) and for a controller refused for flying
-     the other actuation mode; the exit status, 0 or 1 (a flight that did not end well, an event not flown)
+     not end well, for a timeline event it never flew and for a started mission no controller flew (:mod:`.verdict`),
+     and for a controller refused for flying the other actuation mode; the exit status, 0 or 1 (a flight that did
+     not end well, an event not flown, a started mission not flown)
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from bridge.core.flight import Flight
 from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.vehicle.config import VehicleConfig
 from bridge.nodes.vehicle.node import Vehicle
-from bridge.nodes.vehicle.verdict import flights_not_ended_well, timeline_not_reached
+from bridge.nodes.vehicle.verdict import flights_not_ended_well, start_not_flown, timeline_not_reached
 from bridge.record.runlog import side_dir
 
 
@@ -28,7 +29,8 @@ def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = Non
     on_stop_signals(v.stop)
     v.run()
     v.report_stats()
-    said = flights_not_ended_well(v.sim.events) + timeline_not_reached(v.sim)
+    said = (flights_not_ended_well(v.sim.events) + timeline_not_reached(v.sim)
+            + start_not_flown(v.missions.start_requested, v.missions.started))
     mismatch = v.targets.mismatch
     sys.stderr.writelines(f"bsst vehicle: {why}\n" for why in said)
     if mismatch.refused:

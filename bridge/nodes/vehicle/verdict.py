@@ -15,6 +15,9 @@ minutes later), or its flight's time 0 never came (real time: no controller's ta
 arm that left it on the ground, in HOLD or LAND, flies nothing: :mod:`bridge.autopilot.flightstart`); any one makes
 the exit status 1 too, as ``summary.json``'s ``ended_by.not_reached`` is said by ``bsst sitl``
 
+:func:`start_not_flown`: one line for a mission a ground station started under ``--await-mission`` that no
+controller ever took up (the vehicle alone waits for ``bsst controller --await-mission``): exit status 1 too
+
 ``bsst controller`` alone says what went wrong as far as it knows (bridge.nodes.offboard.run); the vehicle alone,
 stopped (Ctrl-C, SIGTERM), says what its own flights came to. A clean stop of a vehicle whose flights ended well (or
 that never flew) says nothing and exits 0.
@@ -47,6 +50,15 @@ def flights_not_ended_well(events: Iterable[Event]) -> list[str]:
         said.append((failsafe.t, f"failsafe at t={failsafe.t:.3f} s: {failsafe.shown}: its flight ended in it (no "
                                  "arm, no mode selected, took it back)"))
     return [text for _, text in sorted(said, key=lambda s: s[0])]
+
+
+def start_not_flown(starting: bool, started: dict[str, str] | None) -> list[str]:
+    """A mission a ground station started (``--await-mission``) that no controller's arm ever took up, one line
+    (module docstring); empty if none is pending (never started, or flown)."""
+    if not starting or started is None:
+        return []
+    return [f"not flown: the mission started by {started['command']} [by {started['by']}] was never flown: no "
+            "controller took it up (bsst controller --await-mission flies it; bsst sitl --await-mission runs both)"]
 
 
 def timeline_not_reached(sim: SimVehicle) -> list[str]:
