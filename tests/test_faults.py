@@ -517,10 +517,9 @@ def test_a_ground_stations_real_time_flight_flies_its_timeline_and_disturbance_f
 
 
 def test_a_flight_of_the_vehicles_own_begins_when_it_is_sent_up_not_at_an_arm_on_the_ground() -> None:
-    """flight_begun: armed in HOLD on the ground, no flight, even for an EKF vehicle (gnss set) whose HOLD holds its
-    estimate's start height and creeps the plant up ~0.3 m (under AIRBORNE_M, and its target, given at the arm, not
-    above the estimate then); a DO_REPOSITION's HOLD to 2 m from there is one at once (the command that sends it up,
-    before its lift-off), as is TAKEOFF; disarmed, none."""
+    """flight_begun: armed in HOLD on the ground, no flight, even for an EKF vehicle (gnss set) whose estimate starts
+    ~0.3 m above the ground (a landed HOLD idles there: test below); a DO_REPOSITION's HOLD to 2 m from there is one
+    at once (the command that sends it up, before its lift-off), as is TAKEOFF; disarmed, none."""
     sine = load_mission(ROOT / "missions" / "sine.toml").with_overrides(duration_s=1.0)
     for mission in (sine, sine.with_overrides(sensors={"set": "gnss"}, estimator={"kind": "ekf"})):
         v = prepare(mission).make_vehicle()
@@ -538,3 +537,25 @@ def test_a_flight_of_the_vehicles_own_begins_when_it_is_sent_up_not_at_an_arm_on
         v.set_mode("takeoff")
         v.arm_in_mode()
         assert flight_begun(v)
+
+
+def test_a_hold_armed_on_the_ground_idles_there_until_a_takeoff_even_on_an_ekfs_estimate() -> None:
+    """A landed HOLD, as PX4's position controller keeps a landed vehicle at idle until a takeoff is wanted: armed in
+    HOLD on the ground, truth or an EKF (gnss set) whose height estimate starts ~0.3 m above the ground, the vehicle
+    rests there, motors idle, for 5 s (its true height 0); a TAKEOFF from there climbs to its height. On the old code
+    the EKF vehicle's HOLD held its estimate's start height (0.294 m) and lifted the plant to 0.316 m by itself."""
+    sine = load_mission(ROOT / "missions" / "sine.toml").with_overrides(duration_s=1.0)
+    for mission in (sine, sine.with_overrides(sensors={"set": "gnss"}, estimator={"kind": "ekf"})):
+        v = prepare(mission).make_vehicle()
+        v.set_mode("hold")
+        v.arm_in_mode()
+        assert v.events[-1].text.endswith(": landed, idle until a takeoff"), v.events[-1].text
+        top = 0.0
+        while v.t < 5.0:
+            v.advance()
+            top = max(top, v.plant.state[4])
+        assert v.armed and v.mode == "hold" and v.plant.on_ground and top == 0.0, (mission.estimator, top)
+        v.set_mode("takeoff")
+        while v.t < 12.0 and v.mode == "takeoff":
+            v.advance()
+        assert v.armed and v.mode == "hold" and abs(v.plant.state[4] - v.takeoff_alt_m) < 0.5, v.plant.state[4]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import signal
+import time
 from pathlib import Path
 
 import pytest
@@ -245,9 +246,9 @@ def test_a_flight_its_plant_ended_says_its_timeline_was_cut_there_not_at_the_sto
             assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
             assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
-            v.wait_event(lambda e: e.startswith("wind: "), timeout=30)
+            v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
             assert _inject(gcs, M.FAILURE_UNIT_SYSTEM_MOTOR, M.FAILURE_TYPE_OFF, 0) == M.MAV_RESULT_ACCEPTED
-            end = v.wait_event(lambda e: e.startswith(("crashed: ", "diverged: ")), timeout=30)
+            end = v.wait_report(Event, lambda e: e.kind in ("crashed", "diverged"), timeout=30)
             v.p.send_signal(signal.SIGINT)
             status = v.p.wait(timeout=30)
         finally:
@@ -261,3 +262,53 @@ def test_a_flight_its_plant_ended_says_its_timeline_was_cut_there_not_at_the_sto
     assert len(said) == 2 and said[1].startswith(head) and said[1].endswith(tail), said
     flown = float(said[1][len(head):-len(tail)])  # the end's time of the flight: time 0 is a step at or after the arm
     assert end.t - armed.t - 1.0 / RATE_HZ - 2e-3 <= flown <= end.t - armed.t + 2e-3, (armed.t, end.t, flown)
+
+
+def test_an_ekf_vehicle_armed_in_hold_on_the_ground_stays_there_until_com_disarm_prflt_disarms_it(
+        tmp_path: Path) -> None:
+    """A real ``bsst vehicle --realtime`` with an EKF (gnss set), its height estimate ~0.3 m above the ground at the
+    start, armed by a pymavlink ground station in HOLD on the ground (a landed HOLD: motors idle, as PX4) stays
+    there: every EXTENDED_SYS_STATE while armed says ON_GROUND (the plant's true state rests), until PX4's
+    pre-takeoff timeout (COM_DISARM_PRFLT = 2 s) disarms it, an event saying so. On the old code the HOLD held the
+    estimate's start height and lifted the vehicle ~0.3 m by itself: IN_AIR at once, and off the ground the
+    timeout was dropped (never disarmed)."""
+    mission = tmp_path / "gcsekf.toml"
+    mission.write_text(f'name = "gcsekf"\nduration_s = 10.0\nrate_hz = {RATE_HZ}\n[trajectory]\nkind = "sine"\n'
+                       'amplitude = 0.0\n[sensors]\nset = "gnss"\n[estimator]\nkind = "ekf"\n')
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), "--param", "COM_DISARM_PRFLT=2",
+                      cwd=ROOT)
+        try:
+            v.wait_report(Ready, timeout=60)
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            tgt = (gcs.target_system, gcs.target_component)
+            for command, params in ((M.MAV_CMD_DO_SET_MODE, HOLD), (M.MAV_CMD_COMPONENT_ARM_DISARM, (1,))):
+                gcs.mav.command_long_send(*tgt, command, 0, *params, *(0,) * (7 - len(params)))
+                assert _ack(gcs, command).result == M.MAV_RESULT_ACCEPTED
+            armed = v.wait_report(Event, lambda e: e.kind == "armed", timeout=30)
+            landed, was_armed = [], False
+            deadline = time.monotonic() + 30.0  # the disarm is due 2 s after the arm
+            while time.monotonic() < deadline:
+                m = gcs.recv_match(type=["HEARTBEAT", "EXTENDED_SYS_STATE"], blocking=True, timeout=5)
+                assert m is not None, "no telemetry"
+                if m.get_type() == "HEARTBEAT":
+                    now_armed = bool(m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+                    if was_armed and not now_armed:
+                        break
+                    was_armed = now_armed
+                elif was_armed:
+                    landed.append(m.landed_state)
+                    assert m.landed_state == M.MAV_LANDED_STATE_ON_GROUND, landed
+            else:
+                pytest.fail(f"still armed 30 s after the arm in HOLD: {len(landed)} EXTENDED_SYS_STATE seen armed")
+            disarmed = v.wait_report(Event, lambda e: e.kind == "disarmed", timeout=30)
+        finally:
+            gcs.close()
+            v.stop()
+    assert armed.text == "armed, HOLD", armed
+    assert disarmed.text == "disarmed: no takeoff within COM_DISARM_PRFLT = 2 s of arming", disarmed
+    assert 2.0 - 0.05 <= disarmed.t - armed.t < 2.0 + 2.0, (armed.t, disarmed.t)  # (its time runs on the wall's)
+    assert len(landed) >= 10, landed  # 10 Hz for ~2 s armed
+    hold = next(e for e in _events(v) if e.kind == "mode" and e.t >= armed.t)
+    assert hold.text.endswith(": landed, idle until a takeoff"), hold

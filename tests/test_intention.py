@@ -85,8 +85,8 @@ def test_a_geofence_land_failsafe_from_hold_disarms_into_hold_where_a_ground_sta
     assert sim.events[-1].text == f"HOLD {CLEARED}" and (sim.events[-1].mode, sim.events[-1].armed) == (HOLD, False)
     assert sim.mode == HOLD and not sim.armed
     sim.arm_in_mode()
-    assert sim.armed and sim.mode == HOLD and [e.text for e in sim.events[-2:]] == ["armed, HOLD",
-                                                                                    "HOLD at x=0.000 y=0.000 z=0.000 m"]
+    assert sim.armed and sim.mode == HOLD and [e.text for e in sim.events[-2:]] == [
+        "armed, HOLD", "HOLD at x=0.000 y=0.000 z=0.000 m: landed, idle until a takeoff"]
 
 
 def test_a_disarm_by_command_in_the_failsafe_clears_it_too() -> None:

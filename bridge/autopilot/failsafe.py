@@ -167,9 +167,11 @@ def _z_velocity(z: float, X: tuple[float, ...], g: OnboardGains, up: float, down
 
 class Target:
     """Where the on-board controller flies: a set-point for the state X. ``lands``: the vehicle
-    disarms once it rests on the ground under this target."""
+    disarms once it rests on the ground under this target; ``idle``: resting on the ground under it, its motors
+    idle (a landed HOLD, :class:`LandedHold`)."""
 
     lands = False
+    idle = False
 
     def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
         raise NotImplementedError
@@ -204,6 +206,17 @@ class PositionHold(Target):
 
     def setpoint(self, X: tuple[float, ...], g: OnboardGains) -> Setpoint:
         return Setpoint(_xy_velocity(self.x, self.y, X, g, self.speed), _z_velocity(self.z, X, g, g.v_up), self.psi)
+
+
+@dataclass(frozen=True)
+class LandedHold(PositionHold):
+    """HOLD selected, or armed in, on the ground: a landed HOLD. Resting on the ground its motors idle and it stays
+    there (no set-point flown: a height estimate above the ground, an EKF's at rest, lifts nothing) until a command
+    sends it up (TAKEOFF, RTL: a new target); off the ground (pushed up) it holds as :class:`PositionHold`. As PX4:
+    its position controller keeps a landed vehicle at idle, integrators reset, until a takeoff is wanted
+    (MulticopterPositionControl, TakeoffHandling)."""
+
+    idle = True
 
 
 @dataclass(frozen=True)

@@ -23,14 +23,15 @@ from bridge.autopilot.modes import GROUND_MODES, TAKEOFF
 from bridge.autopilot.simvehicle import SimVehicle
 
 CLIMB_M = 0.3  # m: a target this far above the vehicle's published height sends it up (DO_REPOSITION: >= 0.5 m)
-# m above the start: up for good, beyond the creep of a HOLD armed on the ground that holds its estimate's start
-# height (an EKF's, gnss set: up to 0.32 m seen), which flies nothing it was asked to
-AIRBORNE_M = 1.0
+# m above the start: off the ground for good. A HOLD armed on the ground idles there (a landed HOLD,
+# failsafe.LandedHold): an EKF's start height estimate above the ground (gnss set: up to 0.3 m) lifts it no more
+AIRBORNE_M = 0.3
 
 
 def flight_begun(sim: SimVehicle, engaged: bool = False) -> bool:
     """Whether ``sim`` flies a flight of its own controller now (the module docstring); ``engaged``: its mode's
-    target was given just now (compared with the estimate then: the creep's estimate drifts from a HOLD's later)."""
+    target was given just now (compared with the estimate then: an estimate on the ground drifts from a HOLD's
+    target later, an EKF's settling from its start height, and a landed HOLD flies none of it)."""
     if not sim.armed or sim.mode not in GROUND_MODES:
         return False
     if sim.mode == TAKEOFF:

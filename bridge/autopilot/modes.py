@@ -2,7 +2,7 @@
 
 In:  a mode a ground station selected, the vehicle's state X (paper frame: m, m/s, rad, rad/s), its home and rally
      points (m), Return's heights, the landing speed (m/s) and its slow-down near the ground, the start's height and
-     a takeoff altitude (m), or a point to hold (DO_REPOSITION)
+     a takeoff altitude (m), or a point to hold (DO_REPOSITION); whether it rests on the ground (a landed HOLD)
 Out: the on-board controller's target for the mode and the ``mode`` event's text (:func:`mode_target`); the
      mission's end action's target, mode and ``end`` event's text (:func:`end_target`)
 """
@@ -12,6 +12,7 @@ from __future__ import annotations
 from bridge.autopilot.failsafe import (
     FailsafeConfig,
     Land,
+    LandedHold,
     PositionHold,
     ReturnConfig,
     ReturnHome,
@@ -36,16 +37,21 @@ MODES = (OFFBOARD, FAILSAFE, LANDED, *GROUND_MODES, TERMINATION)  # every mode t
 
 def mode_target(mode: str, X: tuple[float, ...], *, takeoff_z: float, alt: float, descent_rate: float,
                 home: tuple[float, float, float], rally: tuple[tuple[float, float], ...], rtl: ReturnConfig,
-                hold_at: PositionHold | None = None, slowdown: LandSlowdown | None = None) -> tuple[Target, str]:
+                hold_at: PositionHold | None = None, slowdown: LandSlowdown | None = None,
+                landed: bool = False) -> tuple[Target, str]:
     """What ``mode`` (HOLD, LAND, RTL, TAKEOFF) flies from state X, and its event's text: HOLD holds where it is (or
-    flies to ``hold_at`` and holds there), LAND lands where it is at ``descent_rate`` (with ``slowdown``, faster
-    above MPC_LAND_ALT2 by the height above home, as PX4), RTL returns to home or the nearest rally point (and lands
-    so), TAKEOFF climbs to ``takeoff_z`` (the start's height plus ``alt``, m) over where it is."""
+    flies to ``hold_at`` and holds there; ``landed``, resting on the ground, a landed HOLD: motors idle on the
+    ground until a command sends it up, :class:`~bridge.autopilot.failsafe.LandedHold`), LAND lands where it is at
+    ``descent_rate`` (with ``slowdown``, faster above MPC_LAND_ALT2 by the height above home, as PX4), RTL returns
+    to home or the nearest rally point (and lands so), TAKEOFF climbs to ``takeoff_z`` (the start's height plus
+    ``alt``, m) over where it is."""
     if mode == HOLD and hold_at is not None:
         extra = "" if hold_at.psi is None else f", heading {hold_at.psi:.3f} rad"
         extra += "" if hold_at.speed is None else f", at most {hold_at.speed:g} m/s across"
         return hold_at, (f"HOLD, repositioned: from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m to x={hold_at.x:.3f} "
                          f"y={hold_at.y:.3f} z={hold_at.z:.3f} m{extra}")
+    if mode == HOLD and landed:
+        return LandedHold.here(X), f"HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m: landed, idle until a takeoff"
     if mode == HOLD:
         return PositionHold.here(X), f"HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m"
     if mode == LAND:

@@ -259,7 +259,7 @@ class SimVehicle:
     def _engage(self, mode: str, alt: float, hold_at: PositionHold | None = None) -> None:
         target, text = mode_target(mode, self.published(), takeoff_z=self._start_z + alt, alt=alt, home=self.home,
                                    descent_rate=self.failsafe.descent_rate, rally=self.rally, rtl=self.rtl,
-                                   hold_at=hold_at, slowdown=self.failsafe.slowdown)
+                                   hold_at=hold_at, slowdown=self.failsafe.slowdown, landed=self.plant.on_ground)
         self.fly_onboard(target, mode)
         self.event("mode", text, mode=mode, armed=True)
 
@@ -472,6 +472,8 @@ class SimVehicle:
             if self.armed and self.mode != OFFBOARD and onboard.target is not None:
                 if onboard.target.lands and p.on_ground:
                     self._rest(onboard.target)
+                elif onboard.target.idle and p.on_ground:  # a landed HOLD: idle on the ground, nothing flown
+                    p.command(self._zero)
                 else:
                     p.command(onboard.step(p.state if sensors is None else estimator.estimate(p.t), p.dt))
             p.step()
