@@ -379,13 +379,18 @@ def test_a_ground_stations_offboard_or_arm_on_the_wall_clock_engages_lockstep_at
     assert not between, between
 
 
-def test_an_answer_to_a_wall_clock_state_after_lockstep_engages_again_is_counted_apart_not_stale(tmp_path):
+@pytest.mark.parametrize("late", [0, 6])
+def test_an_answer_to_a_wall_clock_state_after_lockstep_engages_again_is_counted_apart_not_stale(tmp_path, late):
     """A ground station's HOLD takes a lockstep flight onto the wall clock, where the vehicle sends a state each period
     that a controller answers as any other; its OFFBOARD again engages lockstep at the next period's start, so the
     answer to the last state sent on the wall clock can come after it. That answer is too late to fly but nobody's
     fault: it is counted in ``answered_wall_clock``, not refused as ``stale`` (docs/hostile-input.md: a target for a
     lockstep step already flown, a late or repeated datagram), which it was until the third wave's thirty-ninth
-    session. An answer to a lockstep step long flown is still ``stale``."""
+    session. An answer to a lockstep step long flown is still ``stale``. ``late``: the controller reads that many more
+    states of the wall clock before the OFFBOARD (a loaded machine) and answers that backlog after it. Until the
+    forty-third session this answered the three states after ``wall`` whatever step lockstep engaged at: OFFBOARD taken
+    more than three periods later (the test's process held 60 ms), all three were wall-clock states, none flew, and
+    ``accepted`` stayed 4 (``late`` 6 failed so every time)."""
     rate = 50.0
     period = round(1e6 / rate)  # us
     with _gcs_and_controller(tmp_path, rate) as links:
@@ -409,20 +414,32 @@ def test_an_answer_to_a_wall_clock_state_after_lockstep_engages_again_is_counted
             t = state_after(t)
             answer(t)
         gcs_says(M.MAV_CMD_DO_SET_MODE, *hold)  # on the wall clock from the next step
-        wall = state_after(t)  # a state sent on the wall clock: left unanswered for now
+        # a state sent on the wall clock, left unanswered for now: the second after step 3's (the first, step 4's, may
+        # be the one lockstep sent before the HOLD came)
+        behind = [state_after(state_after(t))]
+        for _ in range(late):  # the controller behind: ``late`` more states of the wall clock read, not yet answered
+            behind.append(state_after(behind[-1]))
+        wall = behind[0]
         gcs_says(M.MAV_CMD_DO_SET_MODE, *offboard)  # lockstep again (ACKed at the period's start it engages at)
+        again = v.wait_report(Event, lambda e: e.kind == "mode" and e.mode == "offboard" and e.by is not None
+                              and e.by.link == "gcs")
+        j = round(again.t * rate)  # the step lockstep engaged at: its state the first one sent in lockstep again
+        assert behind[-1] < j * period, (behind, j)
         answer(wall)  # its answer, late
         answer(period)  # an answer to step 1, flown in lockstep long ago
-        k = state_after(wall)
-        for _ in range(3):  # every newer state answered, as the controller does (the wall clock's too, if any)
+        for k in behind[1:]:  # the rest of the controller's backlog
             answer(k)
+        k = state_after(behind[-1])
+        while k <= (j + 2) * period:  # every newer state answered, as the controller does: the wall clock's left, if
+            answer(k)  # any, then steps j, j + 1 and j + 2 in lockstep
             k = state_after(k)
         ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
         assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
     s = _stats(v)
     # step 1's answer is stale, or, had step 1's state been resent (unanswered 50 ms on a loaded machine), expected
     assert s["rejected"] == {"stale": 1} or (s["rejected"] == {} and s["answered_again"] >= 1), s
-    assert s["answered_wall_clock"] >= 1 and s["accepted"] >= 4 + 1, s
+    # every answer to a state of the wall clock, from ``wall``'s to step j's, counted apart; steps j to j + 2 flown
+    assert s["answered_wall_clock"] == j - wall // period and s["accepted"] >= 4 + 3, (j, wall // period, s)
 
 
 def test_mavproxy_arms_through_stdin(tmp_path):
