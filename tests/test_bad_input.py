@@ -1354,6 +1354,24 @@ def test_every_flag_types_refusal_is_typed_the_flag_its_source(shared_files):
             except UsageError as e:
                 raise AssertionError(f"bsst {cmd} {flag} {bad!r}: refused untyped: {e}") from None
     assert typed > 100, typed
+    # the flags checked once parsed (an address, a key file) alike: until the forty-third session each of these was
+    # built by hand, source None (``--vehicle 127.0.0.1:x``: a bad_input report with source null, what null)
+    from bridge.mavlink.endpoint import parse_address
+    from bridge.mavlink.signing import key_from_file
+
+    checks = [(flag, bad, functools.partial(parse_address, str(bad), "udpout", flag))
+              for flag in ("--listen", "--gcs", "--vehicle", "--controller-from")
+              for bad in TEXT_BAD[flag](shared_files)]
+    checks += [("--key", bad, functools.partial(key_from_file, bad)) for bad in TEXT_BAD["--key"](shared_files)]
+    refused = 0
+    for flag, bad, check in checks:
+        try:
+            check()
+        except ConfigError as e:
+            assert e.source == f"{flag} {bad!r}" if flag != "--key" else e.source == f"{flag} {bad}", (flag, bad, e)
+            assert str(e) == f"{e.source}: {e.what}" and e.key is None and e.what, (flag, bad, e)
+            refused += 1
+    assert refused >= 10, refused
 
 
 def test_a_flags_range_refusal_says_the_flag_as_source_and_the_bare_reason(capsys):

@@ -253,7 +253,7 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     # (an empty value is refused by parse_address, not taken for the default)
     listen = parse_address(f"127.0.0.1:{LINK_PORT + n}" if args.listen is None else args.listen, "udpin", "--listen")
     if listen.mode != "udpin":
-        raise ConfigError(f"--listen {args.listen!r}: the controller link is bound (udpin), not udpout")
+        raise ConfigError.at(f"--listen {args.listen!r}", None, "the controller link is bound (udpin), not udpout")
     gcs_text = f"127.0.0.1:{GCS_PORT + n}" if args.gcs is None else args.gcs
     gcs = None if gcs_text.strip().lower() == "none" else parse_address(gcs_text, "udpout", "--gcs")
     sysid, compid = args.controller_id or (CONTROLLER_SYSID, CONTROLLER_COMPID)
@@ -261,7 +261,8 @@ def cmd_vehicle(args: argparse.Namespace) -> int:
     if args.controller_from is not None:
         a = parse_address(args.controller_from, "udpout", "--controller-from")
         if a.mode != "udpout" or a.port == 0:
-            raise ConfigError(f"--controller-from {args.controller_from!r}: give the controller's HOST:PORT")
+            raise ConfigError.at(f"--controller-from {args.controller_from!r}", None,
+                                 "give the controller's HOST:PORT")
         pin = (a.host, a.port)
     cfg = VehicleConfig(listen, gcs, sysid=args.sysid or own or n + 1, controller_sysid=sysid, controller_compid=compid,
                         clock="realtime" if args.realtime else "lockstep",
@@ -290,7 +291,7 @@ def cmd_controller(args: argparse.Namespace) -> int:
     vehicle = parse_address(f"127.0.0.1:{LINK_PORT + args.instance}" if args.vehicle is None else args.vehicle,
                             "udpout", "--vehicle")
     if vehicle.mode != "udpout":
-        raise ConfigError(f"--vehicle {args.vehicle!r}: the controller sends to the vehicle (udpout)")
+        raise ConfigError.at(f"--vehicle {args.vehicle!r}", None, "the controller sends to the vehicle (udpout)")
     if args.radio and args.realtime:
         raise ConfigError("--radio with --realtime: a fleet's one radio in real time is its relays' (bsst relay "
                           "--radio); the controller's is lockstep's")

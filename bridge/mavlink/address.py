@@ -54,18 +54,18 @@ def parse_address(text: str, default_mode: str = "udpout", flag: str = "address"
         break
     host, _, port_text = s.rpartition(":")
     if not host or not port_text:
-        raise ConfigError(f"{flag} {text!r}: expected [udpin:|udpout:]HOST:PORT")
+        raise ConfigError.at(f"{flag} {text!r}", None, "expected [udpin:|udpout:]HOST:PORT")
     try:
         port = int(port_text)
     except ValueError:
-        raise ConfigError(f"{flag} {text!r}: port must be an integer") from None
+        raise ConfigError.at(f"{flag} {text!r}", None, "port must be an integer") from None
     lo = 0 if mode == "udpin" else 1
     if not lo <= port <= 65535:
-        raise ConfigError(f"{flag} {text!r}: port must be in [{lo}, 65535]")
+        raise ConfigError.at(f"{flag} {text!r}", None, f"port must be in [{lo}, 65535]")
     try:
         socket.getaddrinfo(host, port, socket.AF_INET, socket.SOCK_DGRAM)
     except (socket.gaierror, UnicodeError):
-        raise ConfigError(f"{flag} {text!r}: unknown host {host!r}") from None
+        raise ConfigError.at(f"{flag} {text!r}", None, f"unknown host {host!r}") from None
     return Address(mode, host, port)
 
 

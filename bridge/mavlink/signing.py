@@ -74,27 +74,27 @@ def key_from_file(path: str | os.PathLike[str], flag: str = "--key") -> bytes:
     try:
         st = p.stat()
     except FileNotFoundError:
-        raise ConfigError(f"{flag} {p}: no such file") from None
+        raise ConfigError.at(f"{flag} {p}", None, "no such file") from None
     except OSError as exc:
-        raise ConfigError(f"{flag} {p}: cannot read ({exc.strerror})") from None
+        raise ConfigError.at(f"{flag} {p}", None, f"cannot read ({exc.strerror})") from None
     if not stat.S_ISREG(st.st_mode):
-        raise ConfigError(f"{flag} {p}: not a regular file")
+        raise ConfigError.at(f"{flag} {p}", None, "not a regular file")
     if st.st_mode & (stat.S_IROTH | stat.S_IWOTH):
-        raise ConfigError(f"{flag} {p}: readable or writable by others (mode {stat.S_IMODE(st.st_mode):04o}); "
-                          f"chmod 600 it")
+        raise ConfigError.at(f"{flag} {p}", None, f"readable or writable by others "
+                             f"(mode {stat.S_IMODE(st.st_mode):04o}); chmod 600 it")
     note_input(p)  # a user's file this process reads (an --overwrite never replaces it)
     try:
         data = p.read_bytes()
     except OSError as exc:
-        raise ConfigError(f"{flag} {p}: cannot read ({exc.strerror})") from None
+        raise ConfigError.at(f"{flag} {p}", None, f"cannot read ({exc.strerror})") from None
     if len(data) == KEY_BYTES:
         return data
     try:
         text = data.decode("utf-8").rstrip("\r\n")
     except UnicodeDecodeError:
-        raise ConfigError(f"{flag} {p}: neither a {KEY_BYTES}-byte key nor a UTF-8 passphrase") from None
+        raise ConfigError.at(f"{flag} {p}", None, f"neither a {KEY_BYTES}-byte key nor a UTF-8 passphrase") from None
     if not text.strip():
-        raise ConfigError(f"{flag} {p}: empty (a {KEY_BYTES}-byte key or a passphrase expected)")
+        raise ConfigError.at(f"{flag} {p}", None, f"empty (a {KEY_BYTES}-byte key or a passphrase expected)")
     return _sha256(text.encode("utf-8")).digest()
 
 
