@@ -13,8 +13,10 @@ the forking, the descriptors, the exit status and the lifetimes; this module giv
 run a script, as CPython would: ``sys.argv``, ``sys.path[0]``, a fresh ``__main__``, the non-daemon threads
 waited for at the end, an uncaught Ctrl-C ending the process by SIGINT (status -2). Each script is its own process
 (own pid, session, sockets, exit status). Started cold instead (exec'd, as before) where ``BSST_FORK_SERVER=0``,
-where the script's ``PYTHONPATH`` is not this process's (the server's ``sys.path`` would not be the script's), or
-where the server cannot start or answer.
+where the command line is neither ``-c SCRIPT`` nor a file (``-m MODULE``, ``-u``, any other interpreter option:
+:func:`warm_enough`), where any of the script's ``PYTHON*`` variables (``PYTHONPATH``, ``PYTHONIOENCODING``,
+``PYTHONDONTWRITEBYTECODE``, ...) is not this process's (the server's interpreter read its own at its start: its
+``sys.path``, its streams' encoding would not be the script's), or where the server cannot start or answer.
 """
 
 from __future__ import annotations
@@ -35,16 +37,16 @@ from bridge.nodes import forkserver as fs
 from bridge.nodes.process import die_with_parent
 
 SERVER = "tests.gcsfork"
-_server: fs._Server | None = None
+_server: fs.Server | None = None
 _lock = threading.Lock()
 
 
-def _the_server() -> fs._Server:
+def _the_server() -> fs.Server:
     """This process's ground-station server, started on first use (again if it died, or in a fork of its owner)."""
     global _server
     with _lock:
         if _server is None or not _server.alive():
-            _server = fs._Server.start(SERVER)
+            _server = fs.Server.start(SERVER)
         return _server
 
 
@@ -56,7 +58,7 @@ def start_script(args: Sequence[str], stdout: int, stderr: int, *, stdin: int | 
     or exec'd as :class:`subprocess.Popen` would (module docstring)."""
     cwd = os.getcwd() if cwd is None else os.fspath(cwd)
     env = dict(os.environ) if env is None else dict(env)
-    if fs._forking(env) and env.get("PYTHONPATH") == os.environ.get("PYTHONPATH"):
+    if fs.forking(env) and warm_enough(args, env):
         try:
             with open(os.devnull, "rb") as null:
                 fds = (null.fileno() if stdin is None else stdin, stdout, stderr)
@@ -66,6 +68,19 @@ def start_script(args: Sequence[str], stdout: int, stderr: int, *, stdin: int | 
     return subprocess.Popen([sys.executable, *args], stdin=subprocess.DEVNULL if stdin is None else stdin,
                             stdout=stdout, stderr=stderr, cwd=cwd, env=env, start_new_session=True,
                             preexec_fn=die_with_parent)
+
+
+def _python_vars(env: dict[str, str] | os._Environ[str]) -> dict[str, str]:
+    return {k: v for k, v in env.items() if k.startswith("PYTHON")}
+
+
+def warm_enough(args: Sequence[str], env: dict[str, str]) -> bool:
+    """Whether ``python ARGS`` in ``env`` runs forked as it would exec'd: a ``-c`` script or a file (another option,
+    ``-m``, ``-u``, ..., or none at all, is the interpreter's own to read), and the interpreter's start-up
+    environment (every ``PYTHON*`` variable: PYTHONPATH, PYTHONIOENCODING, PYTHONDONTWRITEBYTECODE, ...) this
+    process's, the server's, which read its own at its start and would not read the script's."""
+    runs = args[:1] == ["-c"] or bool(args) and not args[0].startswith("-")
+    return runs and _python_vars(env) == _python_vars(os.environ)
 
 
 # -- the server ------------------------------------------------------------------------------------------------------
@@ -117,9 +132,7 @@ def _print_traceback(exc: BaseException) -> None:
 
 def run_child(argv: list[str]) -> int:
     """In the forked child: run ``python ARGV`` as CPython would (module docstring); its exit status."""
-    if fs._inherited is not None:  # the child's own connection to this server: a script forks no bsst child here
-        os.close(fs._inherited[1])
-        fs._inherited = None
+    fs.drop_inherited()  # the child's own connection to this server: a script forks no bsst child here
     mavutil = sys.modules.get("pymavlink.mavutil")
     if mavutil is not None:  # what its import does with this environment (the server imported it with its own)
         os.environ.setdefault("MAVLINK_DIALECT", "all")
@@ -141,7 +154,7 @@ def run_child(argv: list[str]) -> int:
     except KeyboardInterrupt as exc:  # CPython: the traceback, its end, and then SIGINT to itself (status -2)
         _print_traceback(exc)
         threading._shutdown()  # type: ignore[attr-defined]
-        fs._child_exit()
+        fs.child_exit()
         for stream in (sys.stdout, sys.stderr):
             stream.flush()
         signal.signal(signal.SIGINT, signal.SIG_DFL)

@@ -53,3 +53,17 @@ def test_a_script_forked_warm_is_its_own_process_and_a_ctrl_c_ends_it_as_cold() 
     finally:
         p.kill()
     assert p.returncode == -signal.SIGINT and err.rstrip().endswith("KeyboardInterrupt"), err
+
+
+@pytest.mark.parametrize("args, env", [
+    (("-m", "platform"), ENV),  # an interpreter option, not a script's path: once FileNotFoundError .../-m
+    (("-c", "import sys; print(sys.stdout.encoding, sys.dont_write_bytecode)"),
+     {**ENV, "PYTHONIOENCODING": "latin-1", "PYTHONDONTWRITEBYTECODE": "1"}),  # once the server's own, frozen
+], ids=["-m", "PYTHON-vars"])
+def test_what_the_interpreter_reads_at_its_start_is_the_scripts_own(tmp_path, args, env) -> None:
+    """An interpreter option other than ``-c`` or start-up variables (``PYTHON*``) not the server's: the script
+    runs as exec'd (started cold), the same output and status."""
+    warm = run_script(*args, cwd=tmp_path, env=env, timeout=60)
+    cold = subprocess.run([sys.executable, *args], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
+    assert (warm.returncode, warm.stdout, warm.stderr) == (cold.returncode, cold.stdout, cold.stderr)
+    assert cold.returncode == 0 and cold.stdout.strip(), cold

@@ -200,7 +200,7 @@ def test_a_client_waits_on_a_server_that_works(monkeypatch: pytest.MonkeyPatch, 
     proc = subprocess.Popen([sys.executable, "-c", SERVER, str(theirs.fileno()), server], pass_fds=(theirs.fileno(),))
     theirs.close()
     try:
-        client = forkserver._Server(ours, proc)
+        client = forkserver.Server(ours, proc)
         if server == "busy":
             asked = time.monotonic()
             assert client._until(lambda: client.answers.pop(1, None), 2.0)["pid"] == 0

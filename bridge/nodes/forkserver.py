@@ -72,7 +72,7 @@ class ForkedChild:
     """A child forked by the server, with the ``Popen`` calls a session makes. Its exit status comes from the
     server (the child's parent); its exit itself is seen on a pidfd, which also carries the signals."""
 
-    def __init__(self, server: _Server, pid: int, pidfd: int) -> None:
+    def __init__(self, server: Server, pid: int, pidfd: int) -> None:
         self.pid = pid
         self.returncode: int | None = None
         self.args = ["fork", str(pid)]
@@ -118,7 +118,7 @@ class ForkedChild:
         self.send_signal(signal.SIGKILL)
 
 
-class _Server:
+class Server:
     """This process's end of one fork server: requests out, answers and exit statuses in, under one lock
     (a fleet's sessions start their children from threads)."""
 
@@ -135,7 +135,7 @@ class _Server:
         self.gone = False
 
     @classmethod
-    def start(cls, module: str = SERVER_MODULE) -> _Server:
+    def start(cls, module: str = SERVER_MODULE) -> Server:
         """A server process of this process's own: ``python -m MODULE FD PADDING`` (the test kit runs one of its
         own for its ground-station scripts, tests/gcsfork.py)."""
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
@@ -230,13 +230,13 @@ class _Server:
             self.answers[int(msg["id"])] = msg
 
 
-_server: _Server | None = None
-_servers: list[_Server] = []  # every one this process used (their CPU time: forked_cpu_s)
+_server: Server | None = None
+_servers: list[Server] = []  # every one this process used (their CPU time: forked_cpu_s)
 _server_lock = threading.Lock()
 _inherited: tuple[int, int] | None = None  # (pid, fd): a forked child's own connection to the server that forked it
 
 
-def _the_server() -> _Server:
+def _the_server() -> Server:
     """This process's fork server: in a child forked by one, that same server (over the connection it was
     forked with); otherwise one of its own, started on first use (again if it died, or in a forked copy of
     the owner)."""
@@ -244,9 +244,9 @@ def _the_server() -> _Server:
     with _server_lock:
         if _server is None or not _server.alive():
             if _inherited is not None and _inherited[0] == os.getpid():
-                _server = _Server(socket.socket(fileno=_inherited[1]), None)
+                _server = Server(socket.socket(fileno=_inherited[1]), None)
             else:
-                _server = _Server.start()
+                _server = Server.start()
             _inherited = None  # used once: if it fails, a server of our own
             _servers.append(_server)
         return _server
@@ -258,7 +258,16 @@ def forked_cpu_s() -> float:
     return sum(s.cpu_s() for s in _servers)
 
 
-def _forking(env: Mapping[str, str]) -> bool:
+def drop_inherited() -> None:
+    """In a forked child that forks no child of its own through its server (tests.gcsfork's scripts): close its
+    connection to the server that forked it."""
+    global _inherited
+    if _inherited is not None:
+        os.close(_inherited[1])
+        _inherited = None
+
+
+def forking(env: Mapping[str, str]) -> bool:
     """Whether children are forked: not with ``BSST_FORK_SERVER=0`` in ``env``, nor without pidfds (Linux 5.3+)."""
     return env.get(ENV, "1") != "0" and hasattr(os, "pidfd_open")
 
@@ -266,7 +275,7 @@ def _forking(env: Mapping[str, str]) -> bool:
 def warm() -> bool:
     """Start this process's fork server now, so that its imports overlap the caller's own preparation (a
     no-op when children are exec'd). Whether a server runs, to fork the caller's children."""
-    if _forking(os.environ):
+    if forking(os.environ):
         try:
             return _the_server().alive()
         except OSError:
@@ -281,7 +290,7 @@ def start_child(argv: Sequence[str], stdout: int, stderr: int, *, stdin: int | N
     server, or exec'd if there is none (module docstring)."""
     cwd = os.getcwd() if cwd is None else os.fspath(cwd)
     env = dict(os.environ) if env is None else dict(env)
-    if _forking(env):
+    if forking(env):
         try:
             with open(os.devnull, "rb") as null:
                 fds = (null.fileno() if stdin is None else stdin, stdout, stderr)
@@ -378,7 +387,7 @@ def _drop(client: socket.socket, live: dict[int, tuple[int, socket.socket | None
     client.close()
 
 
-def _child_exit() -> None:
+def child_exit() -> None:
     """What an exec'd ``python -m bridge`` runs at its end and ``os._exit`` skips: the exit handlers the command
     registered (``atexit``, last first; the server's own were cleared at the fork), such as the removal of the
     temporary folder matplotlib was given where the home is unwritable (bridge.record.mplsetup: a forked ``bsst
@@ -447,7 +456,7 @@ def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], 
     rc = 1
     try:  # the child: as `python -m bridge ARGV` would start, without the imports
         os.setsid()
-        atexit._clear()  # the server's exit handlers are the server's; the child runs its own at its end (_child_exit)
+        atexit._clear()  # the server's exit handlers are the server's; the child runs its own at its end (child_exit)
         die_with_parent()
         for f in close:
             os.close(f)
@@ -481,7 +490,7 @@ def _fork(req: dict[str, Any], fds: list[int], run: Callable[[list[str]], int], 
         rc = 1
     finally:  # the command is over: a Ctrl-C now must not raise out of here into a copy of the server's loop
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        _child_exit()
+        child_exit()
         for stream in (sys.stdout, sys.stderr):
             try:
                 stream.flush()
