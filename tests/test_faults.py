@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from bridge import simulate
-from bridge.autopilot.failsafe import PositionHold
+from bridge.autopilot.failsafe import LandedHold, PositionHold
 from bridge.autopilot.flightstart import AIRBORNE_M, flight_begun
 from bridge.core.flight import prepare
 from bridge.record.metrics import gps_outages
@@ -549,7 +549,7 @@ def test_a_hold_armed_on_the_ground_idles_there_until_a_takeoff_even_on_an_ekfs_
         v = prepare(mission).make_vehicle()
         v.set_mode("hold")
         v.arm_in_mode()
-        assert v.events[-1].text.endswith(": landed, idle until a takeoff"), v.events[-1].text
+        assert isinstance(v.onboard.target, LandedHold), (v.onboard.target, v.events[-1].text)
         top = 0.0
         while v.t < 5.0:
             v.advance()
