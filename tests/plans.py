@@ -19,6 +19,17 @@ ROOT = Path(__file__).resolve().parents[1]
 BOX_PLAN = ROOT / "examples" / "box.plan"
 PLAN = json.loads(BOX_PLAN.read_text())
 
+# a plan of the other items and frames (tests/test_plan.py, tests/test_route_yaw.py): a waypoint held 2 s with its yaw
+# given (90 deg, east), a loiter, a pass-through, return to launch
+ITEMS_AND_FRAMES = """QGC WPL 110
+0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
+1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t10\t1
+2\t0\t0\t16\t2\t0\t0\t90\t47.3978319\t8.545594\t498.0\t1
+3\t0\t6\t19\t3\t0\t0\tnan\t47.3978319\t8.5457268\t10\t1
+4\t0\t5\t16\t0\t0\t0\tnan\t47.397742\t8.5457268\t498.0\t1
+5\t0\t2\t20\t0\t0\t0\t0\t0\t0\t0\t1
+"""
+
 
 def write_plan(tmp_path: Path, edit: Callable[[dict], None], name: str = "p.plan") -> Path:
     """A copy of the box plan, changed by ``edit``, written as ``tmp_path / name``."""

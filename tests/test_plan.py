@@ -21,7 +21,7 @@ from missions.planfiles import OTHER_NAMES, SUPPORTED, command_name, read_plan_t
 from missions.route import Limits, route_of
 from params import ConfigError
 from tests.benchkit import benchmark_module
-from tests.plans import BOX_PLAN, ROOT, l_plan, write_plan
+from tests.plans import BOX_PLAN, ITEMS_AND_FRAMES, ROOT, l_plan, write_plan
 from tests.sitlkit import run_bsst
 
 # runs `bsst sim` as a subprocess; `bsst margin` flies the batch engine (its kernels loaded first)
@@ -57,16 +57,6 @@ def test_the_box_route_stops_and_passes_where_the_plan_says() -> None:
     assert 4.9 <= speed <= 5.0 + 1e-6  # the plan's 5 m/s is reached, never passed
     climb = max(ref.sample(t / 10)[2][1] for t in range(int(ref.end_s * 10)))
     assert 2.9 <= climb <= 3.0 + 1e-6  # MPC_Z_V_AUTO_UP
-
-
-ITEMS_AND_FRAMES = """QGC WPL 110
-0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
-1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t10\t1
-2\t0\t0\t16\t2\t0\t0\t90\t47.3978319\t8.545594\t498.0\t1
-3\t0\t6\t19\t3\t0\t0\tnan\t47.3978319\t8.5457268\t10\t1
-4\t0\t5\t16\t0\t0\t0\tnan\t47.397742\t8.5457268\t498.0\t1
-5\t0\t2\t20\t0\t0\t0\t0\t0\t0\t0\t1
-"""
 
 
 def test_the_other_items_and_frames() -> None:

@@ -19,18 +19,7 @@ from bridge import simulate
 from missions.minsnap import Smooth
 from missions.planfiles import read_plan_text
 from missions.route import Limits, route_of
-from tests.plans import BOX_PLAN, M_PER_DEG, l_plan, write_plan
-
-# tests/test_plan.py's plan of the other items and frames: a waypoint held 2 s with its yaw given (90 deg, east), a
-# loiter, a pass-through, return to launch
-ITEMS_AND_FRAMES = """QGC WPL 110
-0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
-1\t0\t3\t22\t0\t0\t0\tnan\t47.397742\t8.545594\t10\t1
-2\t0\t0\t16\t2\t0\t0\t90\t47.3978319\t8.545594\t498.0\t1
-3\t0\t6\t19\t3\t0\t0\tnan\t47.3978319\t8.5457268\t10\t1
-4\t0\t5\t16\t0\t0\t0\tnan\t47.397742\t8.5457268\t498.0\t1
-5\t0\t2\t20\t0\t0\t0\t0\t0\t0\t0\t1
-"""
+from tests.plans import BOX_PLAN, ITEMS_AND_FRAMES, M_PER_DEG, l_plan, write_plan
 
 
 def out_and_back(data: dict) -> None:
