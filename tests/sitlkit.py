@@ -45,7 +45,12 @@ def run_bsst(*args: str | Path, cwd: Path = ROOT, env: dict[str, str] | None = N
     """``bsst ARGS`` (``python -m bridge ARGS``) run to its end in ``cwd``, as ``subprocess.run(...,
     capture_output=True, text=True)`` gives it; forked warm by the fork server, as a session's children are
     (docs/testing.md). ``input``: its stdin (default: empty)."""
-    p = Bsst(*args, cwd=cwd, env=env, input=input)
+    return _run_to_end(Bsst(*args, cwd=cwd, env=env, input=input), timeout)
+
+
+def _run_to_end(p: Bsst, timeout: float) -> subprocess.CompletedProcess[str]:
+    """``p`` (a :class:`Bsst` or :class:`Script`) waited for, its output read, as ``subprocess.run`` gives it;
+    ``subprocess.TimeoutExpired`` after ``timeout`` s, ``p`` killed."""
     try:
         out, err = p.communicate(timeout)
     except subprocess.TimeoutExpired:
@@ -156,14 +161,7 @@ def run_script(*args: str | Path, cwd: Path | None = None, env: dict[str, str] |
     """``python ARGS`` run to its end, as ``subprocess.run([sys.executable, *ARGS], capture_output=True, text=True,
     ...)`` gives it: forked warm (:class:`Script`); ``subprocess.TimeoutExpired`` after ``timeout`` s, the script
     killed."""
-    p = Script(*args, cwd=cwd, env=env, input=input)
-    try:
-        out, err = p.communicate(timeout)
-    except subprocess.TimeoutExpired:
-        p.kill()
-        p.wait()
-        raise
-    return subprocess.CompletedProcess(p.args, p.returncode, out, err)
+    return _run_to_end(Script(*args, cwd=cwd, env=env, input=input), timeout)
 
 
 def pool_workers(group: int) -> list[int]:

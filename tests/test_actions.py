@@ -20,9 +20,10 @@ from bridge.mavlink.endpoint import parse_address
 from bridge.nodes.vehicle import Vehicle, VehicleConfig
 from bridge.session import instance_slot
 from missions import MISSION_DIR, Mission, Sine
+from tests.gcskit import command_ack, gcs_link
 from tests.sitlkit import GcsSocket, Proc
 from tests.test_ground_stations import FAST, _mavsdk
-from tests.test_vehicle import _ack, _gcs, _vehicle
+from tests.test_vehicle import _vehicle
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -93,15 +94,15 @@ def test_flight_termination_over_1_5_terminates_as_px4_mains(tmp_path: Path) -> 
     PX4's termination (MANUAL, MAV_STATE_FLIGHT_TERMINATION), a ``terminated`` event naming the ground station. Until
     the third wave's thirty-eighth session it was UNSUPPORTED and nothing happened."""
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path)
         try:
             gcs.wait_heartbeat(timeout=20)
             tgt = (gcs.target_system, gcs.target_component)
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED  # armed in HOLD
+            assert command_ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED  # armed in HOLD
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_DO_FLIGHTTERMINATION, 0, 2, 0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_DO_FLIGHTTERMINATION).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(gcs, M.MAV_CMD_DO_FLIGHTTERMINATION).result == M.MAV_RESULT_ACCEPTED
             hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=10,
                                 condition=f"HEARTBEAT.system_status=={M.MAV_STATE_FLIGHT_TERMINATION}")
             assert hb is not None and (hb.base_mode, hb.custom_mode) == (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 1 << 16)

@@ -53,6 +53,7 @@ from missions.geodetic import Home
 from missions.geofence import Geofence, Zone
 from missions.planfiles import plan_text, read_plan_text
 from params import ConfigError
+from tests.gcskit import upload, vehicle_of
 from tests.plans import l_plan
 from tests.sitlkit import (
     ENV,
@@ -434,26 +435,6 @@ def _ground_station(n: int) -> Any:
                                       dialect="common")
 
 
-def _vehicle_of(gcs: Any) -> tuple[int, int]:
-    """The (system, component) of the first HEARTBEAT the ground station hears (30 s deadline)."""
-    hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=30)
-    assert hb is not None, "no HEARTBEAT within 30 s"
-    return hb.get_srcSystem(), hb.get_srcComponent()
-
-
-def _upload(gcs: Any, target: tuple[int, int], items: list[Any]) -> None:
-    gcs.mav.mission_count_send(*target, len(items), 0)
-    while True:
-        m = gcs.recv_match(type=["MISSION_REQUEST_INT", "MISSION_ACK"], blocking=True, timeout=5)
-        assert m is not None, "the vehicle stopped asking"
-        if m.get_type() == "MISSION_ACK":
-            assert m.type == M.MAV_MISSION_ACCEPTED
-            return
-        item = items[m.seq]
-        item.target_system, item.target_component = target
-        gcs.mav.send(item)
-
-
 def _mission_start(gcs: Any, target: tuple[int, int]) -> tuple[int, str]:
     """MAV_CMD_MISSION_START to ``target``: its COMMAND_ACK's result and, refused, the STATUSTEXT saying why (its
     50-character chunks joined, the last one shorter)."""
@@ -487,8 +468,8 @@ def test_mission_start_flies_a_small_plan_in_real_time(tmp_path, link, how):
         sitl = Proc.bsst("sitl", "--await-mission", "--realtime", "--instance", str(n), "--out", str(out),
                          "--no-plots", "--param", "COM_DISARM_LAND=0.5", *link)
         try:
-            target = _vehicle_of(gcs)
-            _upload(gcs, target, items)
+            target = vehicle_of(gcs)
+            upload(gcs, target, items)
             steps = [(M.MAV_CMD_MISSION_START, (0, 0))] if how == START_COMMAND else \
                 [(M.MAV_CMD_DO_SET_MODE, (M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 4)),
                  (M.MAV_CMD_COMPONENT_ARM_DISARM, (1,))]
@@ -548,11 +529,11 @@ def denied_then_flown(tmp_path_factory):
         sitl = Proc.bsst("sitl", "--await-mission", "--instance", str(n), "--speed", "0", "--out", str(out),
                          "--no-plots", "--param-at", "4:COM_OF_LOSS_T=1")
         try:
-            target = _vehicle_of(gcs)
+            target = vehicle_of(gcs)
             said = []
             for items in (hours, _small_plan_items(plan=LONG_PLAN), _small_plan_items(),
                           _small_plan_items(plan=LOITER_PLAN)):
-                _upload(gcs, target, items)
+                upload(gcs, target, items)
                 said.append(_mission_start(gcs, target))
             rc = sitl.p.wait(timeout=120)
         finally:
@@ -632,8 +613,8 @@ def test_a_vehicle_holding_a_fence_and_rally_points_on_their_bounds_flies_a_grou
         ctl = Proc.bsst("controller", str(settings), "--await-mission", "--instance", str(n),
                         "--out", str(tmp_path / "c"))
         try:
-            target = _vehicle_of(gcs)
-            _upload(gcs, target, _small_plan_items())
+            target = vehicle_of(gcs)
+            upload(gcs, target, _small_plan_items())
             said = _mission_start(gcs, target)
             rc = ctl.p.wait(timeout=120)
         finally:
@@ -663,8 +644,8 @@ def test_the_link_model_acts_on_the_transfer_in_lockstep_and_the_flight_is_offli
         sitl = Proc.bsst("sitl", "--await-mission", "--speed", "0", "--loss", "30", "--param-at", "1:COM_OF_LOSS_T=1",
                          "--instance", str(n), "--out", str(out), "--no-plots")
         try:
-            target = _vehicle_of(gcs)
-            _upload(gcs, target, items)
+            target = vehicle_of(gcs)
+            upload(gcs, target, items)
             gcs.mav.command_long_send(*target, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
             assert sitl.p.wait(timeout=120) == 0, "\n".join(sitl.lines[-30:])
         finally:

@@ -21,16 +21,17 @@ from bridge.mavlink.eventseq import REQUEST_TRIES
 from bridge.nodes.offboard.config import PHASE_STATES
 from bridge.nodes.report import Done, Event, Stats, parse_line
 from bridge.session import instance_slot
+from tests.gcskit import gcs_link
 from tests.sitlkit import Proc
 from tests.test_offboard_realtime import MISSION, RATE, ScriptedVehicle
-from tests.test_vehicle import _gcs, _vehicle
+from tests.test_vehicle import _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 
 def test_a_real_vehicle_sends_each_event_as_a_numbered_event_and_resends_on_request(tmp_path: Path) -> None:
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path)
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
@@ -76,7 +77,7 @@ def test_a_requested_heartbeat_comes_with_the_event_sequence(tmp_path: Path) -> 
     landed and disarmed meanwhile, its EVENTs lost with the outage, read as disarmed by someone else without it
     (``bsst sitl --realtime --blackout 5:6`` with ``[failsafe] resume``: ``aborted``, not re-armed)."""
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path)
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None

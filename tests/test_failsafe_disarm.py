@@ -22,9 +22,10 @@ from bridge.loop import simulate
 from bridge.mavlink.modes import MAIN_AUTO, MAIN_OFFBOARD, SUB_LAND, SUB_LOITER, custom_mode
 from bridge.session import instance_slot
 from missions import MISSION_DIR
+from tests.gcskit import command_ack, gcs_link
 from tests.sitlkit import ENV, run_bsst
 from tests.test_ground_stations import FAST, _from
-from tests.test_vehicle import _ack, _gcs, _vehicle
+from tests.test_vehicle import _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -55,14 +56,14 @@ def test_a_ground_stations_vehicle_disarmed_by_its_geofence_failsafe_shows_hold_
     LAND and CRITICAL as it once stayed until armed again, HOLD (LOITER) and STANDBY, a ``mode`` event of the
     vehicle's own saying why; a plain arm is ACCEPTED in HOLD."""
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path, *FAST, "--param", "COM_DISARM_LAND=1", "--param", "GF_ACTION=5")
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
 
             def command(cmd: int, *p: float) -> int:
                 gcs.mav.command_long_send(n + 1, 1, cmd, 0, *p)
-                return _ack(gcs, cmd).result
+                return command_ack(gcs, cmd).result
 
             def heartbeat(armed: bool, mode: int, status: int) -> None:
                 hb = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=10, condition=(

@@ -24,9 +24,11 @@ from pymavlink.dialects.v20 import common as mavlink
 
 from bridge.nodes.report import Event, Ready, parse_line
 from bridge.session import instance_slot
+from tests.gcskit import command_ack as _ack
+from tests.gcskit import gcs_link as _gcs
 from tests.sitlkit import ROOT, Proc, controller_exit
 from tests.test_inject import _inject
-from tests.test_vehicle import HOLD, _ack, _controller_link, _gcs
+from tests.test_vehicle import HOLD, _controller_link
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 

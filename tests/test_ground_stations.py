@@ -33,8 +33,9 @@ from bridge.nodes.vehicle.reposition import UNSET_INT
 from bridge.session import instance_slot
 from missions import MISSION_DIR, Mission, Sine
 from missions.geodetic import Home
+from tests.gcskit import command_ack, gcs_link
 from tests.sitlkit import ENV, GcsSocket, MavProxy, Proc, run_script, script_result, shown
-from tests.test_vehicle import _ack, _gcs, _vehicle
+from tests.test_vehicle import _vehicle
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -506,7 +507,7 @@ def test_a_reposition_in_a_failsafe_takes_over_as_px4s_mode_change_and_outside_t
     With the limit lowered to 1.9 m it lands again; a reposition 1 m north at 1.5 m, inside, is taken over and
     flown."""
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path, "--speed", "4", "--param", "MPC_LAND_SPEED=0.3", "--param", "GF_ACTION=5",
                      "--param", "GF_MAX_VER_DIST=2", "--param", "MIS_TAKEOFF_ALT=3")
         try:
@@ -515,13 +516,13 @@ def test_a_reposition_in_a_failsafe_takes_over_as_px4s_mode_change_and_outside_t
 
             def command(cmd: int, *p: float) -> int:
                 gcs.mav.command_long_send(n + 1, 1, cmd, 0, *p)
-                return _ack(gcs, cmd).result
+                return command_ack(gcs, cmd).result
 
             def reposition(north: float, up: float) -> int:
                 lat, lon, _ = Home().global_of(north, 0.0, 0.0)
                 gcs.mav.command_int_send(n + 1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_DO_REPOSITION, 0,
                                          0, -1.0, 1.0, 0.0, nan, round(lat * 1e7), round(lon * 1e7), up)
-                return _ack(gcs, M.MAV_CMD_DO_REPOSITION).result
+                return command_ack(gcs, M.MAV_CMD_DO_REPOSITION).result
 
             def heights(count: int) -> list[float]:  # the next ``count`` LOCAL_POSITION_NED heights (m up)
                 got = [gcs.recv_match(type="LOCAL_POSITION_NED", blocking=True, timeout=5) for _ in range(count)]
@@ -563,7 +564,7 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
     point unchecked;
     armed on the ground, DENIED ("take off first"); each refusal with its STATUSTEXT and the vehicle's report."""
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path)
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
@@ -571,7 +572,7 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
             def reposition(flags: float) -> int:
                 gcs.mav.command_int_send(n + 1, 1, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_CMD_DO_REPOSITION, 0, 0,
                                          -1.0, flags, 0.0, math.nan, UNSET_INT, UNSET_INT, 5.0)
-                return _ack(gcs, M.MAV_CMD_DO_REPOSITION).result
+                return command_ack(gcs, M.MAV_CMD_DO_REPOSITION).result
 
             def said(words: str) -> None:
                 m = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=10,
@@ -582,7 +583,7 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
             said("param2 (flags) must be 1")
             # TAKEOFF selected first (the vehicle boots in HOLD, as PX4): the reposition selects HOLD again
             gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_DO_SET_MODE, 0, 29, 4, 2, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(gcs, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_ACCEPTED
             assert reposition(1.0) == M.MAV_RESULT_ACCEPTED
             v.wait_event(lambda s: "mode: HOLD (disarmed: armed in it next) [by 255:190" in s)
             # disarmed, no point is kept, so none is checked: every field NaN (the height now: 0 m) and one 200 m
@@ -590,9 +591,9 @@ def test_do_reposition_disarmed_takes_hold_on_the_ground_is_denied_and_other_fla
             for lat in (math.nan, 47.3977420 + 0.0018):
                 gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_DO_REPOSITION, 0, -1.0, 1.0, 0.0, math.nan, lat,
                                           math.nan if math.isnan(lat) else 8.5455940, math.nan)
-                assert _ack(gcs, M.MAV_CMD_DO_REPOSITION).result == M.MAV_RESULT_ACCEPTED, lat
+                assert command_ack(gcs, M.MAV_CMD_DO_REPOSITION).result == M.MAV_RESULT_ACCEPTED, lat
             gcs.mav.command_long_send(n + 1, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
             v.wait_event(lambda s: "armed, HOLD" in s)
             assert reposition(1.0) == M.MAV_RESULT_DENIED
             said("take off first")
@@ -611,14 +612,14 @@ def test_land_and_rtl_are_not_armed_in_selected_disarmed_and_after_their_landing
     LOITER, and a plain arm is ACCEPTED there (it was once DENIED: the vehicle stayed in LAND). A Return's landing
     likewise."""
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path, *FAST, "--param", "COM_DISARM_LAND=1")
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
 
             def command(cmd: int, *p: float) -> int:
                 gcs.mav.command_long_send(n + 1, 1, cmd, 0, *p)
-                return _ack(gcs, cmd).result
+                return command_ack(gcs, cmd).result
 
             def said(words: str) -> None:
                 m = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=10,

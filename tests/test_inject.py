@@ -23,9 +23,10 @@ from bridge.mavlink.endpoint import CONTROLLER_SYSID
 from bridge.nodes.report import Event, Refused, parse_line
 from bridge.nodes.vehicle.injection import injection
 from bridge.session import instance_slot
+from tests.gcskit import command_ack, gcs_link
 from tests.sitlkit import ENV, ROOT, Proc, run_bsst
 from tests.test_ground_stations import _mavsdk
-from tests.test_vehicle import _ack, _gcs, _vehicle
+from tests.test_vehicle import _vehicle
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -47,7 +48,7 @@ def _inject(gcs, unit: int, ftype: int, instance: float = 0, command_int: bool =
         gcs.mav.command_int_send(*tgt, 0, M.MAV_CMD_INJECT_FAILURE, 0, 0, unit, ftype, instance, 0, 0, 0, 0)
     else:
         gcs.mav.command_long_send(*tgt, M.MAV_CMD_INJECT_FAILURE, 0, unit, ftype, instance, 0, 0, 0, 0)
-    return _ack(gcs, M.MAV_CMD_INJECT_FAILURE).result
+    return command_ack(gcs, M.MAV_CMD_INJECT_FAILURE).result
 
 
 def test_mapping_pure():
@@ -85,7 +86,7 @@ def test_pymavlink_acks_per_unit(tmp_path):
     of a unit that works is ACCEPTED and no event, as a PARAM_SET to the value in force (it was a ``fault``
     event, so a flight whose ground station sent one said "not flown as asked", exit 1, its trace unchanged)."""
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path, "--profile", "x500", "--sensors", "gnss", "--estimator", "ekf", "--realtime")
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
@@ -123,16 +124,16 @@ def test_an_injection_after_the_plant_ended_the_flight_is_denied(tmp_path):
     INJECT_FAILURE is DENIED saying why: the plant is stepped no more, so an accepted fault would never act nor be
     logged (it was ACCEPTED, and MAVSDK's Failure plugin said SUCCESS, for a fault that never happened)."""
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path, "--profile", "x500", "--param", "SYS_FAILURE_EN=1", "--speed", "4")
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
             tgt = (gcs.target_system, gcs.target_component)
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
             nan = math.nan
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, nan, nan, nan, nan)
-            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
             v.wait_line(lambda s: "takeoff done" in s, timeout=60)
             assert _inject(gcs, MOTOR, OFF, 0) == M.MAV_RESULT_ACCEPTED
             v.wait_line(lambda s: '"kind":"crashed"' in s, timeout=60)
@@ -144,7 +145,7 @@ def test_an_injection_after_the_plant_ended_the_flight_is_denied(tmp_path):
             # a mode change is refused so too, in words true of a crash (it said "the plant diverged")
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_DO_SET_MODE, 0, M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4, 3,
                                       0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_DENIED
+            assert command_ack(gcs, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_DENIED
             text = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5,
                                   condition="STATUSTEXT.text.startswith('mode ')")
             assert text is not None and text.text.endswith(": the plant ended the flight"), text
@@ -160,7 +161,7 @@ def test_an_injection_after_the_plant_ended_the_flight_is_denied(tmp_path):
 def test_paper_profile_has_no_rotors(tmp_path):
     """The paper profile (ideal wrench) has no rotor to fail, and the truth estimator no sensor: UNSUPPORTED."""
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path, "--param", "SYS_FAILURE_EN=1")
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
@@ -366,7 +367,7 @@ def test_a_pack_below_its_critical_level_shows_critical_and_is_not_armed(tmp_pat
             6, M.MAV_BATTERY_CHARGE_STATE_CRITICAL)
         tgt = (gcs.target_system, gcs.target_component)
         gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-        assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_TEMPORARILY_REJECTED
+        assert command_ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_TEMPORARILY_REJECTED
         why = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5,
                              condition="STATUSTEXT.severity == 2")  # MAV_SEVERITY_CRITICAL
         assert why is not None and why.text.startswith("preflight: arming denied: battery critical: 6.0 %")
@@ -375,7 +376,7 @@ def test_a_pack_below_its_critical_level_shows_critical_and_is_not_armed(tmp_pat
         low = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10)
         assert low is not None and low.charge_state == M.MAV_BATTERY_CHARGE_STATE_LOW  # 6 %: below the 15 % low
         gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-        assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        assert command_ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
 
 
 @contextlib.contextmanager
@@ -385,7 +386,7 @@ def _x500_on_battery(tmp_path: Path, effects: str, *args: str) -> Iterator[Any]:
     mission = tmp_path / "battery.toml"
     mission.write_text(WINDY_X500.replace("[wind]", "[unused]").split("[unused]")[0] + effects)
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path, str(mission), *args)
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
@@ -413,13 +414,13 @@ def test_a_ground_stations_battery_failure_reads_the_pack_empty_as_px4s(tmp_path
                                 condition="SYS_STATUS.battery_remaining == 0")
         assert status is not None and status.voltage_battery == empty.voltages[0]
         gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-        assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_TEMPORARILY_REJECTED
+        assert command_ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_TEMPORARILY_REJECTED
         assert _inject(gcs, BATTERY, OK, 0) == M.MAV_RESULT_ACCEPTED
         full = gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=10,
                               condition="BATTERY_STATUS.battery_remaining == 100")
         assert full is not None and full.voltages[0] == 16800
         gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-        assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        assert command_ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
 
 
 def test_battery_on_the_ground_station_link(tmp_path):
@@ -438,9 +439,9 @@ def test_battery_on_the_ground_station_link(tmp_path):
         assert (status.voltage_battery, status.current_battery, status.battery_remaining) == (16800, 0, 100)
         tgt = (gcs.target_system, gcs.target_component)
         gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, math.nan)
-        assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
+        assert command_ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
         gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-        assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        assert command_ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
         loaded = gcs.recv_match(type="SYS_STATUS", blocking=True, timeout=10,
                                 condition="SYS_STATUS.current_battery > 500")  # over 5 A: the rotors spin
         assert loaded is not None and 14000 < loaded.voltage_battery < 16800
@@ -448,13 +449,13 @@ def test_battery_on_the_ground_station_link(tmp_path):
                                 condition="BATTERY_STATUS.current_battery > 500")
         assert flying is not None and flying.voltages[0] < 16800 and flying.voltages[1] == 65535
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path / "no-battery", "--profile", "x500")
         try:
             assert gcs.wait_heartbeat(timeout=20) is not None
             gcs.mav.command_long_send(gcs.target_system, gcs.target_component, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
                                       M.MAVLINK_MSG_ID_BATTERY_STATUS, 1e6, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL).result == M.MAV_RESULT_FAILED  # no such stream
+            assert command_ack(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL).result == M.MAV_RESULT_FAILED  # no such stream
             assert gcs.recv_match(type="BATTERY_STATUS", blocking=True, timeout=3) is None
         finally:
             gcs.close()  # (left open it held the instance's GCS port past its slot)

@@ -59,8 +59,9 @@ from bridge.session import instance_slot, sitl
 from missions import Mission, Sine
 from params import ConfigError
 from params.text import quoted
+from tests.gcskit import upload
 from tests.sitlkit import ENV, ROOT, Bsst, Proc, clean_exit, run_bsst
-from tests.test_await_mission import _small_plan_items, _upload
+from tests.test_await_mission import _small_plan_items
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
@@ -436,7 +437,7 @@ def _awaiting_vehicle(tmp_path) -> Iterator[tuple[Any, Callable[..., tuple[int, 
             v.wait_report(Ready)
             gcs.wait_heartbeat(timeout=20)
             tgt = (gcs.target_system, gcs.target_component)
-            _upload(gcs, tgt, _small_plan_items())
+            upload(gcs, tgt, _small_plan_items())
 
             def command(cmd: int, *p: float) -> tuple[int, str]:
                 gcs.mav.command_long_send(*tgt, cmd, 0, *p, *[0.0] * (7 - len(p)))

@@ -27,25 +27,13 @@ from bridge.mavlink.receive import MAX_FRAME
 from bridge.nodes.report import Event, Ready, Stats
 from bridge.record.halves import read_half
 from bridge.session import instance_slot
+from tests.gcskit import command_ack, gcs_link
 from tests.sitlkit import ENV, ROOT, MavProxy, Proc, run_bsst, run_script, script_result, shown
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
 M = mavlink
-
-
-def _gcs(n: int, sysid: int = 255, compid: int = 190):
-    os.environ["MAVLINK20"] = "1"
-    return mavutil.mavlink_connection(f"udpin:127.0.0.1:{GCS_PORT + n}", source_system=sysid,
-                                      source_component=compid, dialect="common")
-
-
-def _ack(conn, command: int, timeout: float = 10.0):
-    m = conn.recv_match(type="COMMAND_ACK", blocking=True, timeout=timeout,
-                        condition=f"COMMAND_ACK.command=={command}")
-    assert m is not None, f"no COMMAND_ACK for {command}"
-    return m
 
 
 def _vehicle(n: int, tmp_path, *extra: str) -> Proc:
@@ -68,7 +56,7 @@ def _stats(v: Proc) -> dict:
 def test_pymavlink_ground_station(tmp_path):
     """Heartbeat, arm and disarm with ACKs, telemetry, requests answered, TIMESYNC."""
     with instance_slot() as n:
-        gcs = _gcs(n)
+        gcs = gcs_link(n)
         v = _vehicle(n, tmp_path)
         try:
             hb = gcs.wait_heartbeat(timeout=20)
@@ -81,18 +69,18 @@ def test_pymavlink_ground_station(tmp_path):
             tgt = (gcs.target_system, gcs.target_component)
 
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
             armed = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5,
                                    condition="HEARTBEAT.base_mode & 128")
             assert armed is not None and armed.system_status == M.MAV_STATE_ACTIVE
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
             text = gcs.recv_match(type="STATUSTEXT", blocking=True, timeout=5)
             assert text is not None and "disarmed" in text.text  # events are said in STATUSTEXT
 
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_REQUEST_MESSAGE, 0, M.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
                                       0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_REQUEST_MESSAGE).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(gcs, M.MAV_CMD_REQUEST_MESSAGE).result == M.MAV_RESULT_ACCEPTED
             ver = gcs.recv_match(type="AUTOPILOT_VERSION", blocking=True, timeout=5)
             # PX4's capabilities that this vehicle serves (FTP: the metadata, read-only; flight termination), not
             # the offboard set-points it does not take (docs/ground-station.md)
@@ -104,7 +92,7 @@ def test_pymavlink_ground_station(tmp_path):
             assert ver is not None and ver.capabilities == served, hex(ver.capabilities if ver else 0)
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_SET_MESSAGE_INTERVAL, 0, M.MAVLINK_MSG_ID_ATTITUDE, 20000,
                                       0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(gcs, M.MAV_CMD_SET_MESSAGE_INTERVAL).result == M.MAV_RESULT_ACCEPTED
             # NAV_TAKEOFF's param7 is m AMSL (as PX4 reads it): 600 m is 112 m above the 488 m home, beyond the
             # plant's envelope: refused, saying why
             gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 600)
@@ -149,7 +137,7 @@ def test_targets_only_from_the_configured_controller(tmp_path):
             # disarmed: a target is refused
             ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, list(wire) + [0.0] * 4)
             ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
             odo = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5)
             assert odo.time_usec == 0 and (odo.frame_id, odo.child_frame_id) == (M.MAV_FRAME_LOCAL_NED,
                                                                                   M.MAV_FRAME_BODY_FRD)
@@ -163,7 +151,7 @@ def test_targets_only_from_the_configured_controller(tmp_path):
             nxt = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==4000")
             assert nxt is not None  # stepped once: t = 1 / 250 s
             ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
-            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
         finally:
             assert v.stop() == 0
             ctl.close()
@@ -191,7 +179,7 @@ def _two_answers_to_step_0(tmp_path, idle_copy: bool) -> dict:
             heard = ("ODOMETRY", "ODOMETRY.time_usec==0") if idle_copy else ("HEARTBEAT", None)
             assert ctl.recv_match(type=heard[0], blocking=True, timeout=20, condition=heard[1]) is not None
             ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
             if not idle_copy:
                 first = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==0")
                 again = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==0")
@@ -201,7 +189,7 @@ def _two_answers_to_step_0(tmp_path, idle_copy: bool) -> dict:
             nxt = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5, condition="ODOMETRY.time_usec==4000")
             assert nxt is not None
             ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
-            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
         finally:
             assert v.stop() == 0
             ctl.close()
@@ -225,19 +213,19 @@ def test_a_resent_arm_that_finds_the_vehicle_armed_is_accepted_not_in_progress(t
             ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
             assert ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
             ctl.mav.command_long_send(sysid, 1, arm, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
             assert ctl.recv_match(type="ODOMETRY", blocking=True, timeout=5,
                                   condition="ODOMETRY.time_usec==0") is not None
             ctl.mav.command_long_send(sysid, 1, arm, 1, 1, 0, 0, 0, 0, 0, 0)  # the resend
-            assert _ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
             ctl.mav.command_long_send(sysid, 1, arm, 0, 1, 0, 0, 0, 0, 0, 0)  # a guard's ask
-            assert _ack(ctl, arm).result == M.MAV_RESULT_IN_PROGRESS
+            assert command_ack(ctl, arm).result == M.MAV_RESULT_IN_PROGRESS
             # step 0 answered: the vehicle steps, the model delivers the arm, and its final answer follows
             ctl.mav.set_actuator_control_target_send(0, 0, sysid, 1, HOVER_WIRE)
-            final = _ack(ctl, arm)
+            final = command_ack(ctl, arm)
             assert (final.result, final.target_system, final.target_component) == (M.MAV_RESULT_ACCEPTED, 200, 191)
             ctl.mav.command_long_send(sysid, 1, arm, 0, 0, 21196, 0, 0, 0, 0, 0)
-            assert _ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
+            assert command_ack(ctl, arm).result == M.MAV_RESULT_ACCEPTED
         finally:
             assert v.stop() == 0
             ctl.close()
@@ -320,7 +308,7 @@ class _Links:
     def gcs_says(self, cmd: int, *params: float) -> None:
         """The ground station's COMMAND_LONG ``cmd``, ACCEPTED."""
         self.gcs.mav.command_long_send(self.sysid, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
-        assert _ack(self.gcs, cmd).result == M.MAV_RESULT_ACCEPTED, (cmd, params)
+        assert command_ack(self.gcs, cmd).result == M.MAV_RESULT_ACCEPTED, (cmd, params)
 
 
 @contextmanager
@@ -328,7 +316,7 @@ def _gcs_and_controller(tmp_path, rate: float) -> Iterator[_Links]:
     """A vehicle stepped at ``rate`` Hz, its ground station's and its controller's links, each heard by it; the
     vehicle stopped (exit 0) and the links closed after."""
     with instance_slot() as n:
-        links = _Links(_vehicle(n, tmp_path, "--rate", f"{rate:g}"), _gcs(n), _controller_link(n), n + 1)
+        links = _Links(_vehicle(n, tmp_path, "--rate", f"{rate:g}"), gcs_link(n), _controller_link(n), n + 1)
         try:
             links.ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
             assert links.ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
@@ -408,7 +396,7 @@ def test_an_answer_to_a_wall_clock_state_after_lockstep_engages_again_is_counted
                     return m.time_usec
 
         ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-        assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        assert command_ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
         t = -1
         while t < 3 * period:  # lockstep: steps 0-3 flown on their answers
             t = state_after(t)
@@ -434,7 +422,7 @@ def test_an_answer_to_a_wall_clock_state_after_lockstep_engages_again_is_counted
             answer(k)  # any, then steps j, j + 1 and j + 2 in lockstep
             k = state_after(k)
         ctl.mav.command_long_send(sysid, 1, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 0, 21196, 0, 0, 0, 0, 0)
-        assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+        assert command_ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
     s = _stats(v)
     # step 1's answer is stale, or, had step 1's state been resent (unanswered 50 ms on a loaded machine), expected
     assert s["rejected"] == {"stale": 1} or (s["rejected"] == {} and s["answered_again"] >= 1), s

@@ -26,9 +26,12 @@ from bridge.nodes.report import Ready, parse_line
 from bridge.nodes.vehicle.verdict import flights_not_ended_well
 from bridge.record.halves import read_half
 from bridge.session import instance_slot
+from tests.gcskit import command_ack as _ack
+from tests.gcskit import gcs_link as _gcs
+from tests.gcskit import upload as _upload
+from tests.gcskit import vehicle_of as _vehicle_of
 from tests.sitlkit import ENV, ROOT, Proc, controller_exit, run_bsst
-from tests.test_await_mission import _small_plan_items, _upload, _vehicle_of
-from tests.test_vehicle import _ack, _gcs
+from tests.test_await_mission import _small_plan_items
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
 
