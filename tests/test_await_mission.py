@@ -1236,6 +1236,35 @@ def test_a_ground_stations_arm_in_hold_on_the_ground_times_out_with_no_mission_a
         gcs.close()
 
 
+def test_a_takeoff_turned_to_hold_before_it_lifts_times_out_as_an_arm_in_hold():
+    """PX4's auto-disarm runs whatever the mode: armed in TAKEOFF on the ground and turned to HOLD before it lifts
+    (never off the ground since the arm), the landed HOLD disarms itself after COM_DISARM_PRFLT (0.2 s), as an arm
+    in HOLD does. On the old code the timeout started only at an arm in HOLD: it stayed armed."""
+    gcs = GcsSocket()
+    v = Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="held")),
+                VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
+    exchange = gcs.exchange
+
+    def command(cmd: int, *params: float) -> Any:
+        return M.MAVLink_command_long_message(1, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+
+    takeoff, hold = command(M.MAV_CMD_DO_SET_MODE, 1, 4, 2), command(M.MAV_CMD_DO_SET_MODE, 1, 4, 3)
+    arm = command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    try:
+        set_param = M.MAVLink_param_set_message(1, 1, b"COM_DISARM_PRFLT", 0.2, M.MAV_PARAM_TYPE_REAL32)
+        assert exchange(v, set_param, "PARAM_VALUE").param_value == pytest.approx(0.2)
+        assert exchange(v, takeoff, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED
+        assert exchange(v, arm, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and v.sim.mode == "takeoff"
+        assert exchange(v, hold, "COMMAND_ACK").result == M.MAV_RESULT_ACCEPTED and v.sim.mode == "hold"
+        assert v.sim.plant.on_ground and v.sim.armed
+        wait_for(lambda: v._housekeeping() or not v.sim.armed, 5.0, "the vehicle's pre-takeoff disarm")
+        last = v.sim.events[-1]
+        assert last.kind == "disarmed" and last.text == "disarmed: no takeoff within COM_DISARM_PRFLT = 0.2 s of arming"
+    finally:
+        v.close()
+        gcs.close()
+
+
 def test_the_watch_reaches_the_box_items_in_order_along_its_flight():
     """goals_of (the route's points, about the home) and ItemWatch along the offline flight of the box: every
     item reached once, in order, the landing last (on the ground)."""

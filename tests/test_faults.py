@@ -559,3 +559,55 @@ def test_a_hold_armed_on_the_ground_idles_there_until_a_takeoff_even_on_an_ekfs_
         while v.t < 12.0 and v.mode == "takeoff":
             v.advance()
         assert v.armed and v.mode == "hold" and abs(v.plant.state[4] - v.takeoff_alt_m) < 0.5, v.plant.state[4]
+
+
+def _landed_hold_after(v, landing: str) -> None:
+    """Take ``v`` off (TAKEOFF), land it by ``landing`` (LAND, or a failsafe's ``land``), select HOLD 0.5 s after
+    its ``landed`` event (within COM_DISARM_LAND), and fly 30 s."""
+    v.set_mode("takeoff")
+    v.arm_in_mode()
+    while v.mode == "takeoff" and v.t < 10.0:
+        v.advance()
+    if landing == "land":
+        v.set_mode("land")
+    else:
+        v.fly_failsafe("land", "failsafe: land", "failsafe: motors stopped")
+    while not [e for e in v.events if e.kind == "landed"] and v.t < 30.0:
+        v.advance()
+    t_landed = v.t
+    while v.t < t_landed + 0.5:
+        v.advance()
+    assert v.armed, v.events[-1].text
+    v.set_mode("hold")
+    while v.t < t_landed + 30.0 and v.armed:
+        v.advance()
+
+
+@pytest.mark.parametrize("landing", ["land", "failsafe"])
+def test_a_landed_hold_after_a_flight_disarms_after_com_disarm_land(landing: str) -> None:
+    """PX4's Commander auto-disarms a landed vehicle whatever its mode: HOLD selected on the ground 0.5 s after a
+    landing (LAND, a failsafe's landing) is a landed HOLD that still disarms COM_DISARM_LAND (2 s) after the
+    landing, and says so. On the old code its LandedHold never disarmed: still armed 30 s later."""
+    v = prepare(load_mission(ROOT / "missions" / "sine.toml").with_overrides(duration_s=1.0)).make_vehicle()
+    _landed_hold_after(v, landing)
+    [landed] = [e for e in v.events if e.kind == "landed"]
+    assert not v.armed and v.events[-1].kind == "disarmed", [(e.kind, e.text) for e in v.events[-4:]]
+    assert v.events[-1].t - landed.t == pytest.approx(v.land_disarm.delay_s, abs=0.01)
+    assert [e for e in v.events if e.kind == "mode" and "disarms as a landing" in e.text]
+
+
+def test_a_missions_end_hold_on_the_ground_idles_there_even_on_an_ekfs_estimate() -> None:
+    """The mission's end HOLD is made as a selected HOLD (modes.hold_here): on the ground it is a landed HOLD. An
+    EKF vehicle (gnss set, estimate ~0.3 m above the ground) armed and ended with ``hold`` on the ground stays
+    there for 5 s. On the old code the end's PositionHold held z=0.294 m and lifted it to 0.321 m."""
+    mission = load_mission(ROOT / "missions" / "sine.toml").with_overrides(
+        duration_s=1.0, sensors={"set": "gnss"}, estimator={"kind": "ekf"})
+    v = prepare(mission).make_vehicle()
+    v.arm()
+    v.end_mission("hold")
+    assert v.mode == "hold" and v.events[-1].text.endswith(": landed, idle until a takeoff"), v.events[-1].text
+    top = 0.0
+    while v.t < 5.0:
+        v.advance()
+        top = max(top, v.plant.state[4])
+    assert v.armed and v.plant.on_ground and top == 0.0, top

@@ -214,8 +214,11 @@ class LandedHold(PositionHold):
     there (no set-point flown: a height estimate above the ground, an EKF's at rest, lifts nothing) until a command
     sends it up (TAKEOFF, RTL: a new target); off the ground (pushed up) it holds as :class:`PositionHold`. As PX4:
     its position controller keeps a landed vehicle at idle, integrators reset, until a takeoff is wanted
-    (MulticopterPositionControl, TakeoffHandling)."""
+    (MulticopterPositionControl, TakeoffHandling). ``lands``: selected after a flight (taken off since arming), it
+    disarms on the ground after COM_DISARM_LAND as a landing does (PX4's Commander auto-disarms whatever the mode;
+    never taken off, COM_DISARM_PRFLT: bridge/nodes/vehicle/prestart.py)."""
 
+    lands: bool = False
     idle = True
 
 

@@ -38,10 +38,11 @@ MODES = (OFFBOARD, FAILSAFE, LANDED, *GROUND_MODES, TERMINATION)  # every mode t
 def mode_target(mode: str, X: tuple[float, ...], *, takeoff_z: float, alt: float, descent_rate: float,
                 home: tuple[float, float, float], rally: tuple[tuple[float, float], ...], rtl: ReturnConfig,
                 hold_at: PositionHold | None = None, slowdown: LandSlowdown | None = None,
-                landed: bool = False) -> tuple[Target, str]:
+                landed: bool = False, flew: bool = False) -> tuple[Target, str]:
     """What ``mode`` (HOLD, LAND, RTL, TAKEOFF) flies from state X, and its event's text: HOLD holds where it is (or
     flies to ``hold_at`` and holds there; ``landed``, resting on the ground, a landed HOLD: motors idle on the
-    ground until a command sends it up, :class:`~bridge.autopilot.failsafe.LandedHold`), LAND lands where it is at
+    ground until a command sends it up, :class:`~bridge.autopilot.failsafe.LandedHold`; ``flew``, taken off since
+    arming: it disarms after COM_DISARM_LAND as a landing), LAND lands where it is at
     ``descent_rate`` (with ``slowdown``, faster above MPC_LAND_ALT2 by the height above home, as PX4), RTL returns
     to home or the nearest rally point (and lands so), TAKEOFF climbs to ``takeoff_z`` (the start's height plus
     ``alt``, m) over where it is."""
@@ -50,10 +51,8 @@ def mode_target(mode: str, X: tuple[float, ...], *, takeoff_z: float, alt: float
         extra += "" if hold_at.speed is None else f", at most {hold_at.speed:g} m/s across"
         return hold_at, (f"HOLD, repositioned: from x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m to x={hold_at.x:.3f} "
                          f"y={hold_at.y:.3f} z={hold_at.z:.3f} m{extra}")
-    if mode == HOLD and landed:
-        return LandedHold.here(X), f"HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m: landed, idle until a takeoff"
     if mode == HOLD:
-        return PositionHold.here(X), f"HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m"
+        return hold_here(X, landed, flew)
     if mode == LAND:
         faster = "" if slowdown is None else (f" below {slowdown.alt2_m:g} m, {slowdown.auto_down_mps:g} m/s above "
                                               f"{max(slowdown.alt1_m, slowdown.alt2_m):g} m")
@@ -68,12 +67,26 @@ def mode_target(mode: str, X: tuple[float, ...], *, takeoff_z: float, alt: float
     return Takeoff.here(X, takeoff_z), f"TAKEOFF to {alt:g} m over x={X[0]:.3f} y={X[2]:.3f} m"
 
 
-def end_target(action: str, X: tuple[float, ...], cfg: FailsafeConfig,
-               home: tuple[float, float, float]) -> tuple[Target, str, str]:
+def hold_here(X: tuple[float, ...], landed: bool, flew: bool) -> tuple[Target, str]:
+    """HOLD where state X is, and its text: the one way to make a HOLD here. ``landed`` (resting on the ground): a
+    landed HOLD (:class:`~bridge.autopilot.failsafe.LandedHold`), idle until a takeoff; ``flew`` (taken off since
+    arming) it disarms after COM_DISARM_LAND as a landing does."""
+    at = f"HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m"
+    if not landed:
+        return PositionHold.here(X), at
+    if flew:
+        return LandedHold(X[0], X[2], X[4], lands=True), f"{at}: landed, disarms as a landing (COM_DISARM_LAND)"
+    return LandedHold.here(X), f"{at}: landed, idle until a takeoff"
+
+
+def end_target(action: str, X: tuple[float, ...], cfg: FailsafeConfig, home: tuple[float, float, float],
+               landed: bool = False, flew: bool = False) -> tuple[Target, str, str]:
     """The mission's end action (``[end] action``, :data:`missions.mission.END_ACTIONS`) from state X: ``hold`` holds
-    the position (HOLD), ``land`` lands where it is as PX4's auto landing (LAND: ``cfg``'s speeds by the height
-    above ``home``, m) and disarms on the ground; (the target, its mode, the ``end`` event's text)."""
+    the position (HOLD, made as a selected one, :func:`hold_here`: on the ground, ``landed``, a landed HOLD), ``land``
+    lands where it is as PX4's auto landing (LAND: ``cfg``'s speeds by the height above ``home``, m) and disarms
+    on the ground; (the target, its mode, the ``end`` event's text)."""
     if action == "hold":
-        return PositionHold.here(X), HOLD, f"mission over: HOLD at x={X[0]:.3f} y={X[2]:.3f} z={X[4]:.3f} m"
+        target, text = hold_here(X, landed, flew)
+        return target, HOLD, f"mission over: {text}"
     return landing_target(cfg, X, home), LAND, (f"mission over: LAND at x={X[0]:.3f} y={X[2]:.3f} m from "
                                                 f"z={X[4]:.3f} m, {cfg.descent_rate:g} m/s")

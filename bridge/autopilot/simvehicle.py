@@ -115,6 +115,7 @@ class SimVehicle:
         self.onboard = OnboardController(Nominal.from_profile(self.plant.profile))
         self.last_command_t = 0.0
         self.land_at: float | None = None  # hold: the plant time its hold ends and it lands
+        self.took_off = False  # off the ground since arming (PX4's auto-disarm: COM_DISARM_LAND, else _PRFLT)
         X0 = self.plant.state
         self._start_z = X0[4]  # m: TAKEOFF's altitude is above the start
         self.home = (X0[0], X0[2], X0[4])  # m: where Return mode flies back to (the start: the ground station's home)
@@ -259,7 +260,10 @@ class SimVehicle:
     def _engage(self, mode: str, alt: float, hold_at: PositionHold | None = None) -> None:
         target, text = mode_target(mode, self.published(), takeoff_z=self._start_z + alt, alt=alt, home=self.home,
                                    descent_rate=self.failsafe.descent_rate, rally=self.rally, rtl=self.rtl,
-                                   hold_at=hold_at, slowdown=self.failsafe.slowdown, landed=self.plant.on_ground)
+                                   hold_at=hold_at, slowdown=self.failsafe.slowdown, landed=self.plant.on_ground,
+                                   flew=self.took_off)
+        if target.lands and self.land_disarm.waits_under(self.onboard.target):
+            self.land_disarm.target = target  # landed: its COM_DISARM_LAND wait goes on, whatever the mode (PX4)
         self.fly_onboard(target, mode)
         self.event("mode", text, mode=mode, armed=True)
 
@@ -268,14 +272,15 @@ class SimVehicle:
         on-board controller from this control period, in every clock, an ``end`` event saying which (at the
         mission's end, on the vehicle's clock). Only armed under offboard control (a failsafe keeps its action)."""
         if self.armed and self.mode == OFFBOARD:
-            target, mode, text = end_target(action, self.published(), self.failsafe, self.home)
+            target, mode, text = end_target(action, self.published(), self.failsafe, self.home,
+                                            self.plant.on_ground, self.took_off)
             self.fly_onboard(target, mode)
             self.event("end", text)
 
     def disarm(self, why: str = "disarmed") -> None:
         if self.armed:
             self._impact.disarming(self.plant)
-            self.armed = False
+            self.armed = self.took_off = False
             self.plant.command(self._zero)
             self._onboard_off()
             self.event("disarmed", why)
@@ -431,6 +436,7 @@ class SimVehicle:
         given, says when ``deliver`` has its next message (s; None: none in flight): with none due within the
         period, no sensors and the offboard command in force, the substeps are one call (the same bits)."""
         p = self.plant
+        self.took_off = self.took_off or (self.armed and not p.on_ground)
         if self.armed and (self.max_hor_m or self.max_ver_m or self.fence is not None) and (
                 self.fence_action or not self.fence_recorded):
             check_limits(self)

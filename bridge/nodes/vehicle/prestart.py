@@ -53,11 +53,13 @@ class PreStart:
         if self.missions is not None:
             return self.awaits()
         sim = self.sim
-        return sim.armed and sim.mode == HOLD and sim.plant.on_ground
+        return sim.armed and sim.mode == HOLD and sim.plant.on_ground and not sim.took_off
 
     def ground_armed(self, now: float) -> None:
         """With no mission awaited: a ground station's arm left the vehicle armed in HOLD on the ground at wall time
-        ``now`` (s): PX4's pre-takeoff timeout runs from it (the events are not the start's: none is awaited)."""
+        ``now`` (s): PX4's pre-takeoff timeout runs from it (the events are not the start's: none is awaited). HOLD
+        selected later on the ground, never off it since the arm, starts it at :meth:`tick`; after a flight
+        (``took_off``) a landed HOLD disarms after COM_DISARM_LAND instead (bridge/autopilot/failsafe.LandedHold)."""
         if self.missions is None and self.at is None and self.times_out():  # (an arm again: the timeout runs on)
             self.at = now
 
@@ -78,6 +80,8 @@ class PreStart:
         COM_DISARM_PRFLT (> 0) since the arm, the vehicle disarms itself, as PX4's pre-takeoff timeout does."""
         at = self.at
         if at is None:
+            if self.missions is None and self.times_out():  # HOLD selected on the ground, never off it since the
+                self.at = now  # arm (a TAKEOFF that had not lifted): as PX4's, whatever the mode it was armed in
             return
         if not self.times_out():
             self.at = None  # disarmed, another mode, taken off, or started
