@@ -23,7 +23,7 @@ from bridge.autopilot.modes import OFFBOARD
 from bridge.autopilot.vehicleevents import Event
 from bridge.nodes.report import Event as ReportedEvent
 from bridge.nodes.report import Ready, parse_line
-from bridge.nodes.vehicle.verdict import flights_not_ended_well
+from bridge.nodes.vehicle.verdict import flights_not_ended_well, start_not_flown
 from bridge.record.halves import read_half
 from bridge.session import instance_slot
 from tests.gcskit import command_ack as _ack
@@ -207,3 +207,28 @@ def test_a_vehicle_alone_whose_started_mission_no_controller_flew_says_so_and_ex
     assert said[0].startswith("bsst vehicle: not flown: the mission started by MISSION_START [by 255:190 "), said
     assert said[0].endswith(" gcs] was never flown: no controller took it up (bsst controller --await-mission flies "
                             "it; bsst sitl --await-mission runs both)"), said
+
+
+def test_a_started_mission_whose_controllers_arm_was_refused_says_the_arm_was_refused() -> None:
+    """start_not_flown: a controller came after the start but PX4's pre-arm check denied its arm (a ``preflight``
+    event after the start): the line says the arm was refused, and why, not that no controller took it up (the old
+    words); a refusal before the start, then none, is the old line."""
+    from bridge.core.flight import prepare  # (in-process: the vehicle's own refusal, no process needed)
+
+    sim = prepare(ROOT / "missions" / "sine.toml", params={"GF_MAX_HOR_DIST": 5.0}).make_vehicle()
+    hx, hy, hz = sim.home
+    sim.plant.state = (hx + 6.0, 0.0, hy, 0.0, hz, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    started = {"command": "MISSION_START", "by": "255:190 127.0.0.1:14550 gcs"}
+    sim.arm()  # refused before the start
+    n0 = len(sim.events)  # the start (MissionManager.started_n0: run.py passes the events from it)
+    sim.event("mission", "start requested by MISSION_START: 3 items, for the controller to fly")
+    assert start_not_flown(True, started, sim.events[n0:])[0].endswith(": no controller took it up (bsst controller "
+                                                                  "--await-mission flies it; bsst sitl "
+                                                                  "--await-mission runs both)")
+    sim.arm()  # the controller's arm, after the start: refused
+    assert not sim.armed
+    refused = sim.events[-1]
+    assert start_not_flown(True, started, sim.events[n0:]) == [
+        f"not flown: the mission started by MISSION_START [by 255:190 127.0.0.1:14550 gcs] was never flown: its arm "
+        f"was refused at t={refused.t:.3f} s: arming denied: 6.00 m from home, beyond GF_MAX_HOR_DIST = 5 m "
+        "(GF_ACTION = 2: hold)"]

@@ -94,6 +94,7 @@ class MissionManager:
         self._reached_at = 0.0
         self.selected = False  # AUTO.MISSION selected (or started) by a ground station, not flown yet
         self.started: dict[str, str] | None = None  # the last start: how (``command``) and by whom (``by``)
+        self.started_n0 = 0  # the vehicle's events from the last start on (its ``mission`` event's index)
         self.chosen = 0  # the current item a ground station chose (MISSION_SET_CURRENT, an upload's current item)
         self.start_requested = False  # started: the controller is to download the mission and fly it
         self.watch: ItemWatch | None = None  # the mission in flight (None: none)
@@ -153,7 +154,7 @@ class MissionManager:
         self.sim.event("mission", f"start requested by {how}: {len(self.mission.items)} items, for the controller "
                                   "to fly")
         attribute(self.sim.events, n0, by)
-        self.started = {"command": how, "by": str(by)}
+        self.started, self.started_n0 = {"command": how, "by": str(by)}, n0
         return None
 
     def _startable(self, what: str) -> str | None:

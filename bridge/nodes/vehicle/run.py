@@ -30,7 +30,8 @@ def run_vehicle(flight: Flight, cfg: VehicleConfig, out: str | Path | None = Non
     v.run()
     v.report_stats()
     said = (flights_not_ended_well(v.sim.events) + timeline_not_reached(v.sim)
-            + start_not_flown(v.missions.start_requested, v.missions.started))
+            + start_not_flown(v.missions.start_requested, v.missions.started,
+                              v.sim.events[v.missions.started_n0:]))
     mismatch = v.targets.mismatch
     sys.stderr.writelines(f"bsst vehicle: {why}\n" for why in said)
     if mismatch.refused:
