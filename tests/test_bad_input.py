@@ -1335,7 +1335,7 @@ def test_a_fleet_given_a_bound_ground_station_address_is_refused_before_anything
 def test_every_flag_types_refusal_is_typed_the_flag_its_source(shared_files):
     """Every flag whose type checks its value (bridge.cli's types), given the walk's bad values: the refusal is a
     ConfigError whose ``source`` is the flag (with the value, for ``--param 'X=1': ...``) and ``what`` the bare reason,
-    its message ``source what`` or ``source: what`` as it always read. Until the third wave's forty-third session each
+    its message ``source what`` or ``source: what`` as it always read. Until the third wave's forty-fourth session each
     was a UsageError whose whole text was its ``what``, no source (``--rate 5``: source None)."""
     from bridge.cli import _parser  # (the parser bsst's main parses with, built once)
 
@@ -1354,7 +1354,7 @@ def test_every_flag_types_refusal_is_typed_the_flag_its_source(shared_files):
             except UsageError as e:
                 raise AssertionError(f"bsst {cmd} {flag} {bad!r}: refused untyped: {e}") from None
     assert typed > 100, typed
-    # the flags checked once parsed (an address, a key file) alike: until the forty-third session each of these was
+    # the flags checked once parsed (an address, a key file) alike: until the forty-fourth session each of these was
     # built by hand, source None (``--vehicle 127.0.0.1:x``: a bad_input report with source null, what null)
     from bridge.mavlink.endpoint import parse_address
     from bridge.mavlink.signing import key_from_file

@@ -376,7 +376,7 @@ def test_an_answer_to_a_wall_clock_state_after_lockstep_engages_again_is_counted
     lockstep step already flown, a late or repeated datagram), which it was until the third wave's thirty-ninth
     session. An answer to a lockstep step long flown is still ``stale``. ``late``: the controller reads that many more
     states of the wall clock before the OFFBOARD (a loaded machine) and answers that backlog after it. Until the
-    forty-third session this answered the three states after ``wall`` whatever step lockstep engaged at: OFFBOARD taken
+    forty-fourth session this answered the three states after ``wall`` whatever step lockstep engaged at: OFFBOARD taken
     more than three periods later (the test's process held 60 ms), all three were wall-clock states, none flew, and
     ``accepted`` stayed 4 (``late`` 6 failed so every time)."""
     rate = 50.0

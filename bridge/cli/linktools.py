@@ -226,7 +226,7 @@ def cmd_relay(args: argparse.Namespace) -> int:
     # bsst sim refuses it. The one path from a mission and its overrides to the parts: the whole mission is checked
     # (a key of its [link] that would change nothing too), and the relay flies the link it gives
     # without a mission the relay's run is its flight: --duration, else a day (a trace must last it, a blackout start
-    # in it: until the forty-third session a 200 s trace with --duration 30 was refused as shorter than "the mission
+    # in it: until the forty-fourth session a 200 s trace with --duration 30 was refused as shorter than "the mission
     # (86400 s)", and a blackout after --duration relayed, exit 0, never happening), and its refusals say so
     run = ("run without --duration" if not args.duration else "--duration" if args.duration <= 86400.0
            else "run (a day at most)")
