@@ -18,6 +18,7 @@ import math
 import signal
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 from pymavlink.dialects.v20 import common as mavlink
@@ -44,6 +45,16 @@ def _events(v: Proc) -> list[Event]:
     return [r for r in map(parse_line, v.lines) if isinstance(r, Event)]
 
 
+def _take_off(gcs: Any) -> None:
+    """A ground station's takeoff as QGroundControl's: NAV_TAKEOFF (the vehicle's own height), then an arm; each
+    accepted."""
+    tgt = (gcs.target_system, gcs.target_component)
+    gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
+    assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
+    gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+    assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+
+
 def test_a_ground_stations_takeoff_flies_the_timeline_from_its_arm_and_says_what_it_never_reached(
         tmp_path: Path) -> None:
     """No controller: the ground station's NAV_TAKEOFF and arm, 1.5 s after the vehicle's start, fly the vehicle
@@ -64,11 +75,7 @@ def test_a_ground_stations_takeoff_flies_the_timeline_from_its_arm_and_says_what
             # the vehicle's plant has run 1.5 s on the ground (its time_boot_ms: simulation time) when the flight begins
             ran = gcs.recv_match(type="ATTITUDE", blocking=True, timeout=30, condition="ATTITUDE.time_boot_ms >= 1500")
             assert ran is not None
-            tgt = (gcs.target_system, gcs.target_component)
-            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
-            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
-            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            _take_off(gcs)
             wind = v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
             v.p.send_signal(signal.SIGINT)
             status = v.p.wait(timeout=30)
@@ -199,11 +206,7 @@ def test_an_arm_in_hold_disarmed_then_a_takeoff_flies_the_timeline_from_the_take
             v.wait_report(Ready, timeout=60)
             assert gcs.wait_heartbeat(timeout=20) is not None
             held = _arm_in_hold_and_disarm(v, gcs)
-            tgt = (gcs.target_system, gcs.target_component)
-            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
-            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
-            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            _take_off(gcs)
             v.wait_report(Event, lambda e: e.kind == "armed" and e.t > held.t, timeout=30)
             wind = v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
             v.p.send_signal(signal.SIGINT)
@@ -240,11 +243,7 @@ def test_a_flight_its_plant_ended_says_its_timeline_was_cut_there_not_at_the_sto
         try:
             v.wait_report(Ready, timeout=60)
             assert gcs.wait_heartbeat(timeout=20) is not None
-            tgt = (gcs.target_system, gcs.target_component)
-            gcs.mav.command_long_send(*tgt, M.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, math.nan, math.nan, math.nan, math.nan)
-            assert _ack(gcs, M.MAV_CMD_NAV_TAKEOFF).result == M.MAV_RESULT_ACCEPTED
-            gcs.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
-            assert _ack(gcs, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            _take_off(gcs)
             v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
             assert _inject(gcs, M.FAILURE_UNIT_SYSTEM_MOTOR, M.FAILURE_TYPE_OFF, 0) == M.MAV_RESULT_ACCEPTED
             end = v.wait_report(Event, lambda e: e.kind in ("crashed", "diverged"), timeout=30)
