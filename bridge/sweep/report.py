@@ -365,8 +365,7 @@ def jitter_section(rows: Sequence[Mapping[str, Any]]) -> list[str]:
 
 def exact(v: float) -> str:
     """Its shortest exact text (``repr``; a whole one without ``.0``): ``:g`` said 123.457 for 123.4567891."""
-    f = float(v)
-    return f"{f:.0f}" if f.is_integer() and abs(f) < 1e15 else repr(f)
+    return f"{float(v):.0f}" if float(v).is_integer() and abs(float(v)) < 1e15 else repr(float(v))
 
 
 def reproduce(row: Mapping[str, Any], swept: Sequence[str], wind_from_deg: float = 0.0) -> str:
@@ -389,8 +388,7 @@ def reproduce(row: Mapping[str, Any], swept: Sequence[str], wind_from_deg: float
 
 
 def mission_wind_from(meta: Mapping[str, Any]) -> float:
-    """The compass direction (deg) a sweep's mission's steady wind blows from (its ``[wind] from_deg``; 0, the
-    north, without one), which a swept wind speed keeps (bridge.sweep.grid)."""
+    """The direction (deg) a sweep's mission's steady wind blows from (``[wind] from_deg``; 0, north, without)."""
     mission = meta.get("mission") if isinstance(meta.get("mission"), Mapping) else {}
     wind = mission.get("wind")
     frm = wind.get("from_deg", 0.0) if isinstance(wind, Mapping) else 0.0

@@ -5,8 +5,7 @@ In:  the vehicle's messages: ODOMETRY (checked: sender, stamp, range; kept newes
      status CRITICAL = its failsafe, PX4 ``custom_mode``: a ground station's mode), COMMAND_ACK, TIMESYNC (clock
      offset, its bounds, round trip, ns), EVENT (typed, bridge.mavlink.events: its id FAILSAFE is its failsafe
      too, LOCKSTEP says it left lockstep; each sequence handled once), CURRENT_EVENT_SEQUENCE and
-     RESPONSE_EVENT_ERROR (the events missed, bridge.mavlink.eventseq), STATUSTEXT (reported as said, never read
-     for a decision)
+     RESPONSE_EVENT_ERROR (the events missed, bridge.mavlink.eventseq), STATUSTEXT (said, never read to decide)
 Out: actuator targets stamped with their state's ``time_usec`` (or the lockstep no-target acknowledgement),
      ARM_DISARM and other COMMAND_LONGs until ACKed, PARAM_SET until the vehicle's PARAM_VALUE echoes it (every
      0.2 s of wall time, until the flight's end), HEARTBEAT, TIMESYNC, REQUEST_EVENT for the EVENTs missed,
@@ -149,8 +148,7 @@ class OffboardLink:
     def event(self, kind: str, text: str, answers: tuple[str, ...] | None = None, t: float | None = None,
               result: str | None = None) -> None:
         """Report an event at the mission time (``t``: at that one instead, s; NaN: not known); ``answers``: the
-        vehicle's own event kinds it answers, ``result``: the answer a command it says had
-        (:class:`bridge.nodes.report.Event`)."""
+        vehicle's own event kinds it answers, ``result``: its command's answer (:class:`bridge.nodes.report.Event`)."""
         self._status(Event.at(self.t_mission if t is None else t, kind, text, answers=answers, result=result))
 
     def _command(self, cmd: int, p1: float, p2: float, tries: int = 30, every_s: float = 0.1,
