@@ -1144,9 +1144,7 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
     gcs = GcsSocket()
     flight = prepare(Mission(Sine(), duration_s=5.0, name="start"))
     exchange, made = gcs.exchange, []
-
-    def command(cmd: int, *params: float) -> Any:
-        return M.MAVLink_command_long_message(1, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+    command = _command
 
     def vehicle_with_mission() -> Vehicle:
         made.append(_vehicle_holding_the_small_plan(gcs, flight, clock))
@@ -1201,17 +1199,24 @@ def test_an_arm_in_hold_on_the_ground_then_auto_mission_starts_the_mission_and_t
         gcs.close()
 
 
+def _command(cmd: int, *params: float) -> Any:
+    """A ground station's COMMAND_LONG to the vehicle (system 1, component 1), the params it does not give 0."""
+    return M.MAVLink_command_long_message(1, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+
+
+def _held_vehicle() -> tuple[GcsSocket, Vehicle]:
+    """A ground station's socket and an in-process vehicle (a 5 s sine, lockstep) sending to it."""
+    gcs = GcsSocket()
+    return gcs, Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="held")),
+                        VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
+
+
 def test_a_ground_stations_arm_in_hold_on_the_ground_times_out_with_no_mission_awaited_too():
     """PX4's pre-takeoff timeout (Commander's auto-disarm while it has not taken off since arming) without
     --await-mission: a ground station's arm in HOLD on the ground disarms itself after COM_DISARM_PRFLT (0.2 s by
     PARAM_SET), an event saying so (not the start's: none is awaited); a TAKEOFF asked for in time stops it."""
-    gcs = GcsSocket()
-    v = Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="held")),
-                VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
-    exchange = gcs.exchange
-
-    def command(cmd: int, *params: float) -> Any:
-        return M.MAVLink_command_long_message(1, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+    gcs, v = _held_vehicle()
+    exchange, command = gcs.exchange, _command
 
     hold, arm = command(M.MAV_CMD_DO_SET_MODE, 1, 4, 3), command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
     try:
@@ -1240,13 +1245,8 @@ def test_a_takeoff_turned_to_hold_before_it_lifts_times_out_as_an_arm_in_hold():
     """PX4's auto-disarm runs whatever the mode: armed in TAKEOFF on the ground and turned to HOLD before it lifts
     (never off the ground since the arm), the landed HOLD disarms itself after COM_DISARM_PRFLT (0.2 s), as an arm
     in HOLD does. On the old code the timeout started only at an arm in HOLD: it stayed armed."""
-    gcs = GcsSocket()
-    v = Vehicle(prepare(Mission(Sine(), duration_s=5.0, name="held")),
-                VehicleConfig(parse_address("udpin:127.0.0.1:0"), parse_address(gcs.url)))
-    exchange = gcs.exchange
-
-    def command(cmd: int, *params: float) -> Any:
-        return M.MAVLink_command_long_message(1, 1, cmd, 0, *params, *[0.0] * (7 - len(params)))
+    gcs, v = _held_vehicle()
+    exchange, command = gcs.exchange, _command
 
     takeoff, hold = command(M.MAV_CMD_DO_SET_MODE, 1, 4, 2), command(M.MAV_CMD_DO_SET_MODE, 1, 4, 3)
     arm = command(M.MAV_CMD_COMPONENT_ARM_DISARM, 1)
