@@ -201,7 +201,8 @@ class Quadrotor:
                 self._touchdown(t + h, X)
             X = ground_contact(X)
         self._still = None
-        if self._pure() and _STATE_BITS.pack(*X) == _STATE_BITS.pack(*self.state):
+        # (== first: in flight it is false at once, without packing two states a step)
+        if X == self.state and self._pure() and _STATE_BITS.pack(*X) == _STATE_BITS.pack(*self.state):
             X = self.state  # (kept: the next step knows it by identity)
             self._still = (X, self.body.constants, self.rk4, _HELD_BITS.pack(*self.realised, self._omega_d, h),
                            self.ground)
