@@ -16,6 +16,7 @@ import subprocess
 import sys
 import tempfile
 import textwrap
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -34,6 +35,20 @@ pytestmark = pytest.mark.process  # starts processes or opens sockets: not in ma
 def _the_server_on(monkeypatch):
     """The fork server as a user has it by default (a suite run with BSST_FORK_SERVER=0 tests it all the same)."""
     monkeypatch.delenv(ENV, raising=False)
+
+
+@pytest.fixture
+def own_server(monkeypatch: pytest.MonkeyPatch) -> Iterator[forkserver.Server | None]:
+    """This test's children start a fork server of their own, in its environment: the worker's is set aside (kept
+    running, with its imports and kernels loaded) and put back at the end, the test's killed. (Tests killed the
+    worker's: its next server started cold and flew its next session's pair plain, ~0.3-0.9 CPU-s a kill.)"""
+    old = forkserver._server
+    monkeypatch.setattr(forkserver, "_server", None)  # the next child starts a server (_the_server)
+    yield old
+    mine = forkserver._server
+    if mine is not None and mine is not old and mine.proc is not None:
+        mine.proc.kill()
+        mine.proc.wait(30)
 
 
 def _alive(pid: int) -> bool:
@@ -138,7 +153,7 @@ def test_a_forked_child_shows_its_command_line_runs_in_its_own_session_and_obeys
     running.close()
 
 
-def test_a_child_ends_with_its_server_and_the_next_child_gets_a_new_server(tmp_path):
+def test_a_child_ends_with_its_server_and_the_next_child_gets_a_new_server(tmp_path, own_server):
     r = _relay(tmp_path)
     server = forkserver._the_server()
     os.kill(server.proc.pid, signal.SIGKILL)
@@ -259,22 +274,20 @@ def _maps_llvm(pid: int) -> bool:
 
 
 @pytest.mark.parametrize("kernels", ["compiled", "plain"])
-def test_a_server_started_for_compiled_kernels_forks_children_that_have_them_loaded(tmp_path, monkeypatch, kernels):
+def test_a_server_started_for_compiled_kernels_forks_children_that_have_them_loaded(tmp_path, monkeypatch, kernels,
+                                                                                    own_server):
     """``BSST_KERNELS=compiled`` when the server starts: it loads the compiled kernels once (numba, the cached
     kernels), and each child it forks starts with them in its memory instead of loading them itself; otherwise
     the server does not load numba at all (a plain or ``auto`` session pays nothing for it)."""
     monkeypatch.setenv("BSST_KERNELS", kernels)
-    old = forkserver._the_server()
-    os.kill(old.proc.pid, signal.SIGKILL)  # the next child starts a server in this environment
-    wait_for(lambda: not _alive(old.proc.pid), 30, "the old server gone")
+    old = own_server  # the next child starts a server in this environment
     r = _relay(tmp_path)  # a relay never loads kernels itself
     server = forkserver._the_server()
     try:
         assert server is not old
         assert _maps_llvm(server.proc.pid) == _maps_llvm(r.child.pid) == (kernels == "compiled")
     finally:
-        r.close()
-        os.kill(server.proc.pid, signal.SIGKILL)  # the worker's next child starts one in the suite's environment
+        r.close()  # (own_server kills this server and puts the worker's back)
 
 
 def _vehicle(tmp_path: Path) -> Started:
@@ -290,14 +303,12 @@ def _vehicle(tmp_path: Path) -> Started:
 
 @pytest.mark.parametrize("kernels", ["auto", "plain"])
 def test_under_auto_a_server_loads_the_compiled_kernels_before_its_third_child_that_flies(tmp_path, monkeypatch,
-                                                                                       kernels):
+                                                                                       kernels, own_server):
     """``BSST_KERNELS=auto``: a relay does not count, one session's pair (two vehicles here) is forked plain,
     and before the third child that flies the server loads the kernels, so that the child starts with them (and
     ``auto`` flies what is loaded: tests/test_kernels.py); ``plain``: never."""
     monkeypatch.setenv("BSST_KERNELS", kernels)
-    old = forkserver._the_server()
-    os.kill(old.proc.pid, signal.SIGKILL)  # the next child starts a server in this environment
-    wait_for(lambda: not _alive(old.proc.pid), 30, "the old server gone")
+    old = own_server  # the next child starts a server in this environment
     started = [_relay(tmp_path)]
     server = forkserver._the_server()
     try:
@@ -310,8 +321,7 @@ def test_under_auto_a_server_loads_the_compiled_kernels_before_its_third_child_t
         assert not any(_maps_llvm(s.child.pid) for s in started[:-1])  # the earlier children are as they were
     finally:
         for s in started:
-            s.close()
-        os.kill(server.proc.pid, signal.SIGKILL)  # the worker's next child starts one in the suite's environment
+            s.close()  # (own_server kills this server and puts the worker's back)
 
 
 WARMER_SCRIPT = """
@@ -414,7 +424,7 @@ def test_a_plain_sessions_launcher_imports_no_sweep_nor_vehicle_code_and_its_chi
 
 
 @pytest.mark.parametrize("command", ["sim", "sitl"])
-def test_a_launcher_forked_by_a_server_imports_nothing_at_its_start(tmp_path, monkeypatch, command) -> None:
+def test_a_launcher_forked_by_a_server_imports_nothing_at_its_start(tmp_path, monkeypatch, command, own_server) -> None:
     """Before the first ``bsst sim`` or ``bsst sitl`` it forks, the server imports what the command imports at its
     start (bridge.cli.forkserver.ChildWarmer: the flight's and the session's code, ~0.005 and ~0.016 CPU-s), so a
     process flying run after run through it (a script, this suite) pays it once, not once a run:
@@ -422,20 +432,13 @@ def test_a_launcher_forked_by_a_server_imports_nothing_at_its_start(tmp_path, mo
     the server's environment: a line on the child's stderr per module it imports)."""
     (tmp_path / "short.toml").write_text('name = "short"\nduration_s = 0.5\n[trajectory]\nkind = "sine"\n')
     monkeypatch.setenv("PYTHONPROFILEIMPORTTIME", "1")
-    old = forkserver._the_server()
-    os.kill(old.proc.pid, signal.SIGKILL)  # the next child starts a server in this environment
-    wait_for(lambda: not _alive(old.proc.pid), 30, "the old server gone")
-    server = None
-    try:
-        with instance_slot() as n:
-            for run in ("one", "two"):
-                argv = [command, "short.toml", "--no-plots", "--out", run]
-                r = run_bsst(*argv, *(["--instance", str(n)] if command == "sitl" else []), cwd=tmp_path)
-                server = forkserver._the_server()
-                assert r.returncode == 0, r.stderr[-3000:]
-                imported = [ln.rpartition("|")[2].strip() for ln in r.stderr.splitlines()
-                            if ln.startswith("import time:") and "imported package" not in ln]
-                assert not imported, (run, " ".join(imported))
-    finally:
-        if server is not None:
-            os.kill(server.proc.pid, signal.SIGKILL)  # the worker's next child starts one in the suite's environment
+    # (own_server: the next child starts a server in this environment, killed at the end)
+    with instance_slot() as n:
+        for run in ("one", "two"):
+            argv = [command, "short.toml", "--no-plots", "--out", run]
+            r = run_bsst(*argv, *(["--instance", str(n)] if command == "sitl" else []), cwd=tmp_path)
+            assert forkserver._the_server() is not own_server
+            assert r.returncode == 0, r.stderr[-3000:]
+            imported = [ln.rpartition("|")[2].strip() for ln in r.stderr.splitlines()
+                        if ln.startswith("import time:") and "imported package" not in ln]
+            assert not imported, (run, " ".join(imported))
