@@ -531,3 +531,56 @@ def test_a_stall_while_the_first_state_is_awaited_is_not_the_missions(tmp_path: 
     machine = any(ln.startswith(CONTROLLER_STALLED) for ln in ctl.lines)
     assert done[0].outcome == "completed" and rc == int(machine), ctl.lines[-5:]
     assert not machine or values["stalls"]["count"] > 0, values["stalls"]
+
+
+def test_a_stall_between_the_arm_and_the_first_target_is_listed_apart_and_the_flight_flown(tmp_path: Path) -> None:
+    """The scripted vehicle arms on the controller's ARM and streams its states from then on; the controller is
+    stopped (SIGSTOP) as the ARM's answer goes out and for 0.3 s (SIGCONT), as a machine busy at start-up stops it,
+    before its phase-lock's states are read: its ARM's answer and 15 states wait in its socket. The mission is flown
+    (every state answered, the first target 0.3 s or more after the arm), exit 0, nothing said; the stall is listed
+    with those before the mission's first state (``stalls_waiting``, t < 0: before the first tick). Until the
+    forty-fifth session nothing noted it (the waits for the ARM's answer and the phase-lock watched no clock), and the
+    phase was taken from the states read late in a bunch: against the real vehicle a 0.3 s stall there left every
+    state 0.25 s old, no target went out and its failsafe took over 0.5 s after the arm, said as a failsafe only."""
+    (tmp_path / "m.toml").write_text(MISSION)
+    v = ScriptedVehicle()
+    ctl = Proc.bsst("controller", str(tmp_path / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
+                    "--out", str(tmp_path / "run"), "--timeout", "20")
+    try:
+        deadline = time.monotonic() + 30
+        while not v.armed:  # heartbeats at 10 Hz until the controller arms us (its ACK sent in v.serve)
+            assert time.monotonic() < deadline and ctl.p.poll() is None, "the controller never armed the vehicle"
+            v.heartbeat()
+            v.until(time.monotonic() + 0.1)
+        os.kill(ctl.p.pid, signal.SIGSTOP)  # at once: the ARM's answer not read yet, or just, no state sent yet
+        armed = time.monotonic()
+        k = int((armed - v.v0) / PERIOD) + 1
+        resumed = False
+        while not v.disarmed:  # states at their times, through the stop, until the mission's end lands us
+            assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
+            if not resumed and time.monotonic() >= armed + 0.3:  # the stall itself: 0.3 s of states queued
+                os.kill(ctl.p.pid, signal.SIGCONT)
+                resumed = True
+            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
+            v.odometry(k)
+            if k % 5 == 0:
+                v.heartbeat()
+            k += 1
+        rc = ctl.p.wait(timeout=20)
+    finally:
+        if ctl.p.poll() is None:
+            os.kill(ctl.p.pid, signal.SIGCONT)
+        ctl.stop()
+        v.sock.close()
+    done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
+    values = stats_of(ctl.lines)
+    waiting = values["stalls_waiting"]
+    assert waiting["count"] >= 1 and waiting["worst_ms"] >= 250.0, waiting  # 0.3 s less a wait's 50 ms at most
+    assert all(t < 0 for t, _ms in waiting["at"]), waiting  # before the mission's first tick
+    assert values["stalls"]["worst_ms"] < 180.0, values["stalls"]  # not the mission's
+    assert v.first_target is not None and v.first_target >= armed + 0.3
+    steps = round(1.4 * RATE)
+    assert len(v.targets) >= steps - 2, (len(v.targets), steps)  # each of its states answered (a hiccup's spared)
+    machine = any(ln.startswith(CONTROLLER_STALLED) for ln in ctl.lines)  # the loaded machine's, in the mission
+    assert done[0].outcome == "completed" and rc == int(machine), ctl.lines[-5:]
+    assert not any("before the mission's first state" in ln for ln in ctl.lines), ctl.lines[-5:]

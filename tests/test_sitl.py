@@ -245,6 +245,41 @@ def test_a_real_time_run_the_machine_stalls_lists_each_stall_by_side_and_exits_1
     assert len(notes) == 1 and notes[0]["source"] == "session"
 
 
+def test_a_controller_stalled_between_the_arm_and_its_first_target_is_named_with_the_failsafe(tmp_path):
+    """The controller stopped (SIGSTOP) for 1.5 s as the vehicle arms on its ARM (a 200 ms link each way: its
+    answer, and its first target, 200 ms off), as a machine busy at start-up stops it: no target comes for 0.5 s,
+    the vehicle's failsafe takes over (as PX4's offboard loss), the run fails, and its summary names the stall with
+    the failsafe: ``timing.stalls_waiting`` (not the mission's ``timing.stalls``), a session note, a line on
+    stderr, exit 1. Until the forty-fifth session only the failsafe was said (``no actuator target for 0.5 s``):
+    nothing noted the controller's stalls between the arm and its first target, nor said them."""
+    (tmp_path / "m.toml").write_text('name = "armstall"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\n' + HOLD)
+    run = tmp_path / "run"
+    with instance_slot() as n:
+        p = Bsst("sitl", str(tmp_path / "m.toml"), "--realtime", "--instance", str(n), "--out", str(run),
+                 "--no-plots", "--delay", "200", env=ENV)
+        try:
+            log = run / "events.log"
+            wait_for(lambda: "[by 200:" in (log.read_text() if log.is_file() else ""), 60, "the vehicle armed")
+            pid = child_pids(run)["controller"]
+            os.kill(pid, signal.SIGSTOP)
+            time.sleep(1.5)  # the stall itself, not a wait for something to happen
+            os.kill(pid, signal.SIGCONT)
+            out, err = p.communicate(timeout=60)
+        finally:
+            if p.poll() is None:
+                p.kill()
+    summary = json.loads((run / "summary.json").read_text())
+    waiting = summary["timing"]["stalls_waiting"]
+    assert summary["outcome"] == "failsafe" and p.returncode == 1, err
+    assert waiting["count"] >= 1 and waiting["worst_ms"] >= 1300.0 and waiting["at"][0][0] < 0, waiting
+    assert summary["timing"]["stalls"]["count"] == 0 or summary["timing"]["stalls"]["worst_ms"] < 180.0
+    said = (f"the machine stalled the controller {waiting['count']} time(s) before the mission's first state "
+            f"(after the vehicle's arm), worst {waiting['worst_ms']:g} ms")
+    assert said in err and said in out, err
+    notes = [e for e in summary["events"] if e["kind"] == "stall" and e["source"] == "session" and said in e["text"]]
+    assert len(notes) == 1, summary["events"]  # (beside it, the loaded machine's own in the mission, if any)
+
+
 def _start_session(tmp_path: Path, n: int, mission: Path = SINE) -> Bsst:
     return Bsst("sitl", str(mission), "--instance", str(n), "--out", str(tmp_path / "run"), "--no-plots", env=ENV)
 

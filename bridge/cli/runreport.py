@@ -16,7 +16,7 @@ import sys
 from typing import Any
 
 from bridge.cli.flags import EXIT_FAILED, EXIT_OK
-from bridge.record.asked import ended_text, not_as_asked
+from bridge.record.asked import ended_text, not_as_asked, waited_text
 
 EVENTS_SHOWN = 16  # events a run's printed summary lists (all of summary.json's beyond: its first 6 and last 10)
 SHOWN_PAIRS = 12  # pairs a fleet's printed summary lists, its closest (summary.json has every pair)
@@ -128,6 +128,8 @@ def report_run(run: Any, command: str) -> int:
     ended = ended_text(run.summary)
     if ended is not None:  # a failsafe, a divergence, a stop (Ctrl-C, SIGTERM), ...: named, as every exit-1 reason is
         print(f"bsst {command}: {ended}", file=sys.stderr)
+        if (waited := waited_text(run.summary)) is not None:  # (not the mission's stall: what may have ended it)
+            print(f"bsst {command}: {waited}", file=sys.stderr)
     for why in not_as_asked(run.summary):
         print(f"bsst {command}: {why}", file=sys.stderr)
     for v in run.summary.get("policies") or []:

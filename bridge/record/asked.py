@@ -5,7 +5,8 @@ In:  a run's ``summary.json`` as a dict (one vehicle's), or the blocks of it a p
      controller``: ``param_at``, ``end``, ``timing.stalls``): ``lockstep``, ``interventions``, ``param_at``, ``end``
      (:mod:`bridge.record.ending`), ``timing.stalls`` (t s, ms)
 Out: :func:`ended_text`: why a flight ended before its mission did (its outcome, who ended it and how: ``failsafe:
-     ended by vehicle: ...``); :func:`not_as_asked`: one line each, ``not flown as asked: ...`` (or ``not a lockstep
+     ended by vehicle: ...``), :func:`waited_text` the machine's stalls of its controller before the mission's first
+     state, said with it; :func:`not_as_asked`: one line each, ``not flown as asked: ...`` (or ``not a lockstep
      run: ...``); any one of them makes the exit status 1
 
 Split out of :mod:`bridge.cli.runreport` (which prints a run's summary) so that ``bsst controller``, below the CLI,
@@ -46,3 +47,15 @@ def not_as_asked(s: dict[str, Any]) -> list[str]:
         said.append(f"not flown as asked: {not_taken_text(s['end'])}")
     stalls = stalls_of(s)
     return said + ([stalls_text(stalls)] if stalls is not None else [])
+
+
+def waited_text(s: dict[str, Any]) -> str | None:
+    """A run that ended before its mission did, its controller stalled by the machine before the mission's first
+    state (``timing.stalls_waiting``, real time: not the mission's, but no target came meanwhile, which may have
+    ended it): said with why it ended; None otherwise."""
+    waited = (s.get("timing") or {}).get("stalls_waiting") or {}
+    if s.get("outcome") in (None, "completed") or not waited.get("count"):
+        return None
+    from bridge.record.summary import waiting_stalls_text  # lazy: numpy
+
+    return waiting_stalls_text(waited)

@@ -257,6 +257,13 @@ def stalls_block(vehicle: Mapping[str, Any], controller: Mapping[str, Any], k0: 
             "at": sorted(at, key=lambda s: s["t"])}
 
 
+def waiting_stalls_text(stalls: Mapping[str, Any]) -> str:
+    """The note of a flight that failed after the machine stalled its controller before the mission's first state
+    (``timing.stalls_waiting``): no target came meanwhile, the vehicle's failsafe counting (docs/sitl.md)."""
+    return (f"the machine stalled the controller {stalls['count']} time(s) before the mission's first state (after "
+            f"the vehicle's arm), worst {stalls['worst_ms']:g} ms: no target meanwhile")
+
+
 def stalls_text(stalls: Mapping[str, Any]) -> str:
     """The note of a real-time run the machine stalled (its events and printed summary)."""
     first = ", ".join(f"{s['side']} {s['ms']:g} ms at t={s['t']:.3f} s" for s in stalls["at"][:3])
@@ -312,6 +319,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     if facts.clock == "realtime":
         summary["timing"]["stalls"] = stalls_block(vs, cs, joined.k0, m.rate_hz, m.duration_s,
                                                    relay_stats if relay is not None else None)
+        # the controller's before the mission's first state (after the vehicle's arm): not the mission's, listed apart
+        summary["timing"]["stalls_waiting"] = cs.get("stalls_waiting") or {"count": 0, "worst_ms": 0.0, "at": []}
     summary["sitl"] = {**facts.sitl, "vehicle_exit": vehicle.exit_text if vehicle else None,
                        "controller_exit": controller.exit_text if controller else None}
     lockstep, off_clock = None, None
@@ -354,6 +363,8 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     texts += [("policy", violation_text(v)) for v in violated]
     if (stalls := stalls_of(summary)) is not None:
         texts.append(("stall", stalls_text(stalls)))
+    if summary["outcome"] != "completed" and (waited := summary["timing"].get("stalls_waiting", {})).get("count"):
+        texts.append(("stall", waiting_stalls_text(waited)))  # not the mission's, but what may have ended it
     left = [lockstep["left_at_s"]] if lockstep is not None and not lockstep["held"] else []  # (its note's)
     stop = [e.t for e in events if e.t is not None] if facts.aborted else []  # all came before it, its effects too
     t = notes_time(joined, events, m.rate_hz, left + stop)

@@ -106,7 +106,11 @@ class Offboard(EndFlying):
         self._status(Ready("controller", vehicle=self.cfg.vehicle.hostport,
                            local=f"{self.ep.local[0]}:{self.ep.local[1]}", clock=self.cfg.clock))
         try:
-            if not self._connect() or not self._arm():
+            if not self._connect():
+                return "aborted"
+            if self.cfg.clock == "realtime":  # the machine's stalls from the ARM to the first tick: stalls_waiting
+                self.watch_stalls()
+            if not self._arm():
                 return "aborted"
             try:
                 outcome = self._fly_lockstep() if self.cfg.clock == "lockstep" else self._fly_realtime()

@@ -17,9 +17,11 @@ import math
 import time
 from typing import Any
 
-from bridge.core.clock import FixedRate, Stalls
+from bridge.core.clock import STALL_S, FixedRate, Stalls
 from bridge.core.wire import step_of_usec
+from bridge.mavlink.endpoint import wait
 from bridge.nodes.offboard.config import (
+    HOUSEKEEPING_S,
     PHASE_S,
     PHASE_STATES,
     STATE_WAIT_PERIODS,
@@ -39,6 +41,9 @@ class RealtimeFlying(OffboardLink):
     stalls: Stalls  # the mission's ticks the machine woke us too late for
     stalls_waiting: Stalls  # those of the ticks before the mission's first state (not the mission's)
     schedule: FixedRate | None  # the tick schedule, once phase-locked
+    _held: Stalls | None = None  # the machine's stalls from the ARM to the mission's first tick (wall time)
+    _woke: float = 0.0  # while they are watched: when the link's wait last woke, and how late (s)
+    _late: float = 0.0
     _way_down: float | None  # the states' way down (s)
     way_down: dict[str, float] | None  # that in ms and how far off it may be (stats)
     _last_state: float  # wall time of the newest state flown
@@ -62,12 +67,16 @@ class RealtimeFlying(OffboardLink):
         period = 1.0 / rate
         steps = self.steps
         mono = time.monotonic
+        if self._held is None:  # (watched from the ARM on: Offboard.run)
+            self.watch_stalls()
         locked = self._phase_lock(period)
         if isinstance(locked, str):
+            self._held_waiting(mono())  # the flight ended in the wait: t before its end
             return locked
         phase, k0 = locked
         self._mission_zero = k0 * period  # the vehicle's clock at mission time 0 (s): its events on the mission's
         self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
+        self._held_waiting(clock.due(0))
         last_k = k0 - 1
         usec, recv = 0, math.nan  # the newest state's stamp and arrival
         flown: Any = None  # the newest state flown
@@ -134,12 +143,54 @@ class RealtimeFlying(OffboardLink):
             self._decide(t, last_k, usec, recv, late)
         return "aborted"
 
+    def watch_stalls(self) -> None:
+        """From now on (the ARM sent) until the mission's first tick, the link's waits (:meth:`_serve`) note the
+        machine's stalls: wake-ups more than STALL_S past the time they slept to (the link's next housekeeping, at
+        most HOUSEKEEPING_S after the last wake-up), at wall time (s of ``time.monotonic``)."""
+        self._held, self._woke, self._late = Stalls(), time.monotonic(), 0.0
+
+    def _serve(self, deadline: float) -> None:
+        held = self._held
+        if held is None:
+            return super()._serve(deadline)
+        for _, m, _addr in wait((self.ep,), deadline):
+            self._on(m)
+        now = time.monotonic()
+        slept_to = min(deadline, self._woke + HOUSEKEEPING_S)  # (a stall before the sleep began: from the last wake)
+        self._late, self._woke = now - slept_to, now
+        held.note(slept_to, self._late)
+        if now >= self._next_house:
+            self._housekeeping()
+        return None
+
+    def _held_waiting(self, zero: float) -> None:
+        """The stalls of the waits from the ARM to the mission's first tick (wall time) listed with the waiting ticks'
+        (:attr:`stalls_waiting`), at s from wall time ``zero`` (that first tick, or where the flight ended before
+        it): t < 0. The waits note no more."""
+        held, self._held = self._held, None
+        if held is None:
+            return
+        for at, ms in held.kept:
+            self.stalls_waiting.note(at - zero, ms * 1e-3)
+        self.stalls_waiting.count += held.count - len(held.kept)
+
+    def _drop_queued(self) -> None:
+        """After a stall of the machine, what queued meanwhile is read in bunches, late: a phase taken from it would be
+        late by as much (a 0.3 s stall after the arm made every state look 0.25 s old, the guard sent no target and
+        the vehicle's failsafe took over): read it all (its messages handled, its states not kept for the lock)."""
+        self.ep.drain(lambda m, _addr: self._on(m))
+        self._odo, self._late, self._woke = None, 0.0, time.monotonic()
+
     def _phase_lock(self, period: float) -> tuple[float, int] | str:
         """Real time: the phase of the vehicle's states (the ticks come just after they arrive): their earliest arrival
         (recv - k / rate) over the first PHASE_STATES states (states read together count each, the newest the read's
         sample), and the mission's first step: the next state's, or the newest's if it came after the five with the
-        fifth (kept for the first tick, which answers it at once). Or the outcome if the vehicle is lost."""
+        fifth (kept for the first tick, which answers it at once). Or the outcome if the vehicle is lost. After a
+        stall of the machine (:meth:`watch_stalls`) the phase is found afresh, on the states that come after what
+        queued meanwhile."""
         self._odo = None
+        if self._late > STALL_S:  # the arm's answer read after a stall: what queued with it is as late
+            self._drop_queued()
         self._last_state = time.monotonic()
         phase: float | None = None
         seen = 0  # states taken
@@ -149,6 +200,9 @@ class RealtimeFlying(OffboardLink):
                 return outcome
             before = self.states
             self._serve(min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s))
+            if self._late > STALL_S:  # the machine stalled this wait: lock afresh on the states after
+                self._drop_queued()
+                phase, seen = None, 0
             if self._odo is None:
                 continue
             k = step_of_usec(self._odo.time_usec, self.rate)

@@ -78,6 +78,10 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                              f"the mission's {flight.mission.duration_s:g} s, no [failsafe] resume to arm it again: "
                              f"nothing left to fly, so the controller ended there (not flown as asked)\n")
         sys.stderr.writelines(f"bsst controller: the vehicle warned: {text}\n" for text in warned)
+        if node.stalls_waiting.count:  # not the mission's, but what may have ended it (the vehicle's failsafe)
+            from bridge.record.summary import waiting_stalls_text  # lazy: the session's words, only for this
+
+            sys.stderr.write(f"bsst controller: {waiting_stalls_text(node.stalls_waiting.report())}\n")
     elif left:
         sys.stderr.write(f"bsst controller: completed, but not in lockstep: said by {node.left_lockstep}\n")
     # what it alone knows of sitl's "not flown as asked" (bridge.record.asked), said in the same words: a scheduled
