@@ -312,6 +312,49 @@ def test_an_ekf_vehicle_armed_in_hold_on_the_ground_stays_there_until_com_disarm
     assert hold.text.endswith(": landed, idle until a takeoff"), hold
 
 
+def test_a_controllers_arm_held_on_the_ground_by_a_ground_station_times_out_from_the_arm(tmp_path: Path) -> None:
+    """A real ``bsst vehicle --realtime`` (COM_DISARM_PRFLT = 2 s) armed by a scripted controller (offboard, 200 /
+    191), which answers its states for 1 s with idle targets (no thrust: on the ground), then a pymavlink ground
+    station's HOLD before any lift-off (a landed HOLD, idle): PX4's pre-takeoff timeout runs from the arm (its
+    commander counts from arming while landed, whatever the mode), so the vehicle disarms itself 2 s after the arm,
+    1 s after the HOLD. Until the forty-fifth session the timeout ran from the HOLD: disarmed 3 s after the arm."""
+    mission = tmp_path / "held.toml"
+    mission.write_text(f'name = "held"\nduration_s = 10.0\nrate_hz = {RATE_HZ}\n[trajectory]\nkind = "sine"\n')
+    idle = [0.0] * 8  # roll, pitch, yaw torques and thrust: nothing lifts it
+    with instance_slot() as n:
+        gcs, ctl = _gcs(n), _controller_link(n)
+        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), "--param", "COM_DISARM_PRFLT=2",
+                      cwd=ROOT)
+        try:
+            v.wait_report(Ready, timeout=60)
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            tgt = (gcs.target_system, gcs.target_component)
+            ctl.mav.heartbeat_send(M.MAV_TYPE_ONBOARD_CONTROLLER, M.MAV_AUTOPILOT_INVALID, 0, 0, 4)
+            assert ctl.recv_match(type="HEARTBEAT", blocking=True, timeout=20) is not None
+            ctl.mav.command_long_send(*tgt, M.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+            assert _ack(ctl, M.MAV_CMD_COMPONENT_ARM_DISARM).result == M.MAV_RESULT_ACCEPTED
+            answered_until = time.monotonic() + 1.0
+            while time.monotonic() < answered_until:  # 1 s on the ground under the controller, each state answered
+                m = ctl.recv_match(type="ODOMETRY", blocking=True, timeout=0.1)
+                if m is not None:
+                    ctl.mav.set_actuator_control_target_send(m.time_usec, 0, *tgt, idle)
+            gcs.mav.command_long_send(*tgt, M.MAV_CMD_DO_SET_MODE, 0, *HOLD, 0, 0, 0, 0)
+            assert _ack(gcs, M.MAV_CMD_DO_SET_MODE).result == M.MAV_RESULT_ACCEPTED
+            disarmed = v.wait_report(Event, lambda e: e.kind == "disarmed", timeout=30)
+        finally:
+            gcs.close()
+            ctl.close()
+            v.stop()
+    events = _events(v)
+    armed = next(e for e in events if e.kind == "armed")
+    hold = next(e for e in events if e.kind == "mode" and e.t >= armed.t)
+    assert armed.text == "armed, offboard control" and hold.text.endswith(": landed, idle until a takeoff"), hold
+    assert not any(e.kind == "failsafe" for e in events), events  # answered until the HOLD: no offboard loss
+    assert hold.t - armed.t >= 0.9, (armed.t, hold.t)  # (the premise: the HOLD came a second into the arm)
+    assert disarmed.text == "disarmed: no takeoff within COM_DISARM_PRFLT = 2 s of arming", disarmed
+    assert 2.0 - 0.05 <= disarmed.t - armed.t < 2.5, (armed.t, hold.t, disarmed.t)  # (from the HOLD: 3 s)
+
+
 def test_an_arm_in_hold_on_the_ground_that_never_flew_asks_nothing_of_the_timeline(tmp_path: Path) -> None:
     """timeline_not_reached, in process: a real-time vehicle (its time 0 held) armed in HOLD on the ground by a
     ground station and disarmed (by command, or by COM_DISARM_PRFLT: the same events), then stopped, never began a

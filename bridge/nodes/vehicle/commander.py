@@ -438,7 +438,7 @@ class Commander:
             terminated = self.actions.refusal("arming denied")
             if terminated:
                 return self._refuse(terminated)
-            was_offboard = sim.armed and sim.mode == OFFBOARD
+            was_armed, was_offboard = sim.armed, sim.armed and sim.mode == OFFBOARD
             from_gcs = by is not None and by.link == "gcs"
             n0 = len(sim.events)
             if from_gcs:
@@ -447,6 +447,7 @@ class Commander:
                 sim.arm(from_hold=self.pre_start.starting() and sim.mode == HOLD)
             if not sim.armed:  # PX4's pre-arm check denied it: its preflight event says why, on every link
                 return mavlink.MAV_RESULT_TEMPORARILY_REJECTED
+            self.pre_start.arm_taken(now, was_armed)  # PX4's pre-takeoff timeout runs from here (landed since)
             if from_gcs and self.pre_start.held():
                 # nothing flies until the mission's start: in lockstep time stands still, as disarmed
                 self.pre_start.armed(now, n0)

@@ -30,6 +30,7 @@ class PreStart:
         self.clock = clock
         self.missions = missions if await_mission else None
         self.at: float | None = None  # wall time (s) of the arm whose timeout runs (None: none runs)
+        self.armed_at: float | None = None  # wall time (s) of the vehicle's latest arm from disarmed, any link's
         if self.missions is not None:
             sim.mode = HOLD  # as PX4 without RC sticks waits in Hold: a ground station's arm arms there
 
@@ -54,6 +55,12 @@ class PreStart:
             return self.awaits()
         sim = self.sim
         return sim.armed and sim.mode == HOLD and sim.plant.on_ground and not sim.took_off
+
+    def arm_taken(self, now: float, was_armed: bool) -> None:
+        """An arm command took (any link's: a ground station's, a controller's offboard arm) at wall time ``now``
+        (s); from disarmed, PX4's pre-takeoff timeout runs from it, whatever mode is selected on the ground later."""
+        if not was_armed:
+            self.armed_at = now
 
     def ground_armed(self, now: float) -> None:
         """With no mission awaited: a ground station's arm left the vehicle armed in HOLD on the ground at wall time
@@ -81,7 +88,10 @@ class PreStart:
         at = self.at
         if at is None:
             if self.missions is None and self.times_out():  # HOLD selected on the ground, never off it since the
-                self.at = now  # arm (a TAKEOFF that had not lifted): as PX4's, whatever the mode it was armed in
+                # arm (a TAKEOFF that had not lifted, a controller's offboard arm): from the arm, as PX4's commander
+                # counts it (landed since arming), whatever the mode it was armed in. Until the forty-fifth session
+                # from the HOLD: a HOLD 8 s after the arm disarmed 10 s later, 18 s after it, not at 10 s
+                self.at = now if self.armed_at is None else min(now, self.armed_at)
             return
         if not self.times_out():
             self.at = None  # disarmed, another mode, taken off, or started
