@@ -26,6 +26,7 @@ from pathlib import Path
 import pytest
 
 from bridge.cli.flags import refusal_line
+from bridge.link.radio import make_radio_file
 from bridge.nodes.report import BadInput, parse_line
 from bridge.session import instance_slot, sitl
 from params import ConfigError
@@ -95,7 +96,7 @@ def test_a_childs_refusal_keeps_its_typed_fields_through_the_session(tmp_path: P
 
 RELAY_REFUSALS = {  # case: (bsst relay's arguments after --listen, with {p} the port taken; its line's start)
     "config_error": (["127.0.0.1:{p}", "--to", "127.0.0.1:9"], "bsst: --listen 127.0.0.1:{p}: cannot bind"),
-    "its_command": (["127.0.0.1:0", "--to", "127.0.0.1:0"], "bsst relay: --to '127.0.0.1:0': port must be in"),
+    "a_flag": (["127.0.0.1:0", "--to", "127.0.0.1:0"], "bsst: --to '127.0.0.1:0': port must be in"),
     "bsst_alone": (["127.0.0.1:0", "--to", "127.0.0.1:9", "--radio-user", "1"], "bsst: --radio-user without --radio"),
     "argparse": (["127.0.0.1:0", "--to", "127.0.0.1:9", "--bogus"], "bsst relay: unrecognized arguments: --bogus"),
 }
@@ -130,3 +131,63 @@ def test_a_watched_sims_usage_error_comes_back_typed_said_once(tmp_path: Path) -
     assert r.stderr.splitlines()[0] == ("bsst: --link-trace / --up-link-trace cannot be combined with delay_ms = 5 "
                                         "(--delay, --jitter, --loss, --burst) in the up direction: the trace gives "
                                         "the delays and the losses"), r.stderr
+
+
+def _typed_child_refusals(tmp: Path, port: int) -> list[tuple[list[str], str, str]]:
+    """(a session's child's arguments, the ``source`` and ``what`` of its refusal): a flag's, typed."""
+    radio = tmp / "radio"
+    make_radio_file(radio, 2)
+    relay = ["relay", "--listen", f"127.0.0.1:{port}", "--duration", "0.1"]
+    return [([*relay, "--to", "127.0.0.1:0"], "--to '127.0.0.1:0'", "port must be in [1, 65535]"),
+            ([*relay, "--to", "nowhere"], "--to 'nowhere'", "expected [udpin:|udpout:]HOST:PORT"),
+            ([*relay, "--to", "127.0.0.1:9", "--client", "udpin:127.0.0.1:5"], "--client 'udpin:127.0.0.1:5'",
+             "the relay sends to it (udpout), not udpin"),
+            ([*relay, "--to", f"127.0.0.1:{port}"], f"--to 127.0.0.1:{port}",
+             f"is the relay's own --listen 127.0.0.1:{port}: it would forward into itself"),
+            (["controller", "missions/sine.toml", "--vehicle", "127.0.0.1:9", "--timeout", "1", "--radio", str(radio),
+              "--realtime"], "--radio", "with --realtime: a fleet's one radio in real time is its relays' (bsst relay "
+                                        "--radio); the controller's is lockstep's"),
+            (["vehicle", "--gate", str(tmp / "gate"), "--realtime"], "--gate",
+             "with --realtime: a fleet's shared step clock is lockstep's (real time keeps the wall clock)")]
+
+
+def test_a_childs_flag_refusal_reports_the_flag_as_its_source(tmp_path: Path) -> None:
+    """A session's child refused for a flag (``bsst relay --to``/``--client``, its ``--to`` its own ``--listen``;
+    ``bsst controller --radio F --realtime``; ``bsst vehicle --gate --realtime``): exit 2, one line ``bsst: `` and
+    the refusal, and its ``bad_input`` report typed as every flag's refusal: ``source`` the flag (and the value, as
+    given), ``what`` the bare reason. Until the forty-fifth session the relay turned its address's typed ConfigError
+    into a plain ValueError, said as ``bsst relay: --to ...``, its report's source ``bsst relay`` and its ``what``
+    the whole message; ``--radio with --realtime`` and ``--gate with --realtime`` had no source, no ``what``."""
+    with _taken_port() as port:  # (refused before the relay binds it)
+        for args, source, what in _typed_child_refusals(tmp_path, port):
+            r = run_bsst(*args, cwd=ROOT, env=ENV, timeout=60)
+            line = f"bsst: {source}{' ' if what.startswith(('with ', 'is ')) else ': '}{what}"
+            assert r.returncode == 2 and r.stderr == line + "\n", (args, r.stderr)
+            [refused] = [x for x in map(parse_line, r.stdout.splitlines()) if isinstance(x, BadInput)]
+            assert (refused.source, refused.key, refused.what) == (source, None, what), (args, refused)
+            assert refusal_line(refused.error()) == line
+
+
+def test_the_link_tools_out_refusals_are_typed(tmp_path: Path, capsys) -> None:
+    """``bsst link show --out`` not a PNG, ``bsst link fit --out`` a file that exists or the trace it reads: exit 2,
+    one line, and the ConfigError typed as every flag's refusal (``source`` ``--out PATH``, ``what`` the reason).
+    Until the forty-fifth session they had no source (the PNG one said as ``bsst link show: --out ...``)."""
+    from bridge.cli import _parser, main
+
+    trace, taken, txt = tmp_path / "t.csv", tmp_path / "p.toml", tmp_path / "f.txt"
+    trace.write_text("t_s,delay_ms\n0,10\n1,10\n")
+    taken.write_text("mine\n")
+    read = f"is {trace}, an input of this command, which writing would destroy; write the output elsewhere"
+    for argv, source, what in ((["link", "show", trace, "--out", txt], f"--out {txt}",
+                                "the figure is a PNG (name it *.png)"),
+                               (["link", "fit", trace, "--out", taken], f"--out {taken}",
+                                "exists; --overwrite to replace it"),
+                               (["link", "fit", trace, "--out", trace, "--overwrite"], f"--out {trace}", read)):
+        argv = [str(a) for a in argv]
+        assert main(argv) == 2, argv
+        assert capsys.readouterr().err == f"bsst: {source}: {what}\n", argv
+        args = _parser().parse_args(argv)
+        with pytest.raises(ConfigError) as refused:
+            args.func(args)
+        assert (refused.value.source, refused.value.key, refused.value.what) == (source, None, what), argv
+    assert taken.read_text() == "mine\n" and not txt.exists()

@@ -293,8 +293,8 @@ def cmd_controller(args: argparse.Namespace) -> int:
     if vehicle.mode != "udpout":
         raise ConfigError.at(f"--vehicle {args.vehicle!r}", None, "the controller sends to the vehicle (udpout)")
     if args.radio and args.realtime:
-        raise ConfigError("--radio with --realtime: a fleet's one radio in real time is its relays' (bsst relay "
-                          "--radio); the controller's is lockstep's")
+        raise ConfigError.at("--radio", None, "with --realtime: a fleet's one radio in real time is its relays' (bsst "
+                             "relay --radio); the controller's is lockstep's", sep=" ")
     cfg = OffboardConfig(vehicle, sysid=args.sysid, clock="realtime" if args.realtime else "lockstep",
                          target_sysid=args.target_sysid, connect_timeout_s=args.timeout, key=_key(args),
                          source_port=args.source_port or 0, await_mission=args.await_mission,

@@ -69,12 +69,12 @@ def _new_output(path: Any, flag: str, overwrite: bool, inputs: Sequence[Any] = (
     from bridge.record.runlog import check_writable  # lazy: start-up time
 
     p = check_writable(path, flag)
-    if p.exists() and not overwrite:
-        raise ConfigError(f"{flag} {p}: exists; --overwrite to replace it")
+    if p.exists() and not overwrite:  # (typed, source the flag and its path: as every flag's refusal)
+        raise ConfigError.at(f"{flag} {p}", None, "exists; --overwrite to replace it")
     for f in inputs:
         if os.path.realpath(f) == os.path.realpath(p):
-            raise ConfigError(f"{flag} {p}: is {f}, an input of this command, which writing would destroy; write "
-                              "the output elsewhere")
+            raise ConfigError.at(f"{flag} {p}", None, f"is {f}, an input of this command, which writing would "
+                                 "destroy; write the output elsewhere")
     return p
 
 
@@ -163,7 +163,7 @@ def cmd_link_show(args: argparse.Namespace) -> int:
 
     out = Path(args.out) if args.out else Path(args.trace).with_suffix(".png")
     if out.suffix.lower() != ".png":
-        raise UsageError("bsst link show", f"--out {out}: the figure is a PNG (name it *.png)")
+        raise ConfigError.at(f"--out {out}", None, "the figure is a PNG (name it *.png)")
     _new_output(out, "--out", args.overwrite, [args.trace])
     tf = read_trace(args.trace)
     print(f"figure: {trace_figure(tf, out)}")
@@ -213,15 +213,12 @@ def cmd_relay(args: argparse.Namespace) -> int:
     from bridge.nodes.report import to_line  # lazy: start-up time
     from bridge.record.runlog import write_json_atomic  # lazy: start-up time
 
-    try:
-        listen = parse_address(args.listen, "--listen", bind=True)
-        target = parse_address(args.to, "--to")
-        client = parse_address(args.client, "--client") if args.client else None
-    except ValueError as exc:
-        raise UsageError("bsst relay", str(exc)) from None
+    listen = parse_address(args.listen, "--listen", bind=True)  # (a ConfigError naming the flag: as every flag's)
+    target = parse_address(args.to, "--to")
+    client = parse_address(args.client, "--client") if args.client else None
     if forwards_to_itself(listen, target):
-        raise UsageError("bsst relay", f"--to {args.to} is the relay's own --listen {args.listen}: it would forward "
-                         "into itself")
+        raise ConfigError.at(f"--to {args.to}", None, f"is the relay's own --listen {args.listen}: it would forward "
+                             "into itself", sep=" ")
     mission = checked_mission(args, args.mission or None)  # read once; a link flag that would change nothing: as
     # bsst sim refuses it. The one path from a mission and its overrides to the parts: the whole mission is checked
     # (a key of its [link] that would change nothing too), and the relay flies the link it gives

@@ -391,11 +391,13 @@ def refuse_vehicle_flags(args: argparse.Namespace) -> None:
 
     if args.realtime and (why := realtime_speed_problem(args.speed)):  # as bsst sitl refuses it
         raise ConfigError(why)
+    # (each typed, source the flag, as every flag's refusal: a session's child reports it with its fields)
     if args.gate and args.realtime:
-        raise ConfigError("--gate with --realtime: a fleet's shared step clock is lockstep's (real time keeps the "
-                          "wall clock)")
+        raise ConfigError.at("--gate", None, "with --realtime: a fleet's shared step clock is lockstep's (real time "
+                             "keeps the wall clock)", sep=" ")
     if args.trace_cap and not args.await_mission:
-        raise ConfigError("--trace-cap: only with --await-mission (it caps the mission a ground station starts)")
+        raise ConfigError.at("--trace-cap", None, "only with --await-mission (it caps the mission a ground station "
+                             "starts)")
     if args.param_at and not args.await_mission:  # (a change at a mission time is the controller's to send)
-        raise ConfigError("--param-at: only with --await-mission (the vehicle refuses at its start a ground station's "
-                          "mission over before T; give the change to the controller, which sends it)")
+        raise ConfigError.at("--param-at", None, "only with --await-mission (the vehicle refuses at its start a ground "
+                             "station's mission over before T; give the change to the controller, which sends it)")
