@@ -19,6 +19,7 @@ from bridge.mavlink.endpoint import CONTROLLER_COMPID, CONTROLLER_SYSID, Address
 
 PHASE_S = 0.0003  # realtime: tick this long after the state's arrival (its one-way trip and decode)
 PHASE_STATES = 5  # realtime: states watched to find the phase of the vehicle's clock
+PHASE_RELOCKS = 10  # realtime: phase-locks begun afresh after the machine's stalls, at most (then it locks on)
 # realtime: a tick whose state is not in yet waits for it at most this share of a period (a
 # late wake-up of the vehicle would otherwise cost the step: the law would answer the state
 # before, and its target would be two periods old when the next step begins); the rest of

@@ -22,6 +22,7 @@ from bridge.core.wire import step_of_usec
 from bridge.mavlink.endpoint import wait
 from bridge.nodes.offboard.config import (
     HOUSEKEEPING_S,
+    PHASE_RELOCKS,
     PHASE_S,
     PHASE_STATES,
     STATE_WAIT_PERIODS,
@@ -193,16 +194,16 @@ class RealtimeFlying(OffboardLink):
             self._drop_queued()
         self._last_state = time.monotonic()
         phase: float | None = None
-        seen = 0  # states taken
+        seen = relocks = 0  # states taken; locks begun afresh after a stall (a machine that stalls every wait: bounded)
         while not self.stopping:
             outcome = self._check_vehicle()
             if outcome:
                 return outcome
             before = self.states
             self._serve(min(self._next_house, self._last_rx + self.cfg.vehicle_timeout_s))
-            if self._late > STALL_S:  # the machine stalled this wait: lock afresh on the states after
+            if self._late > STALL_S and relocks < PHASE_RELOCKS:  # the machine stalled this wait: lock afresh
                 self._drop_queued()
-                phase, seen = None, 0
+                phase, seen, relocks = None, 0, relocks + 1
             if self._odo is None:
                 continue
             k = step_of_usec(self._odo.time_usec, self.rate)
