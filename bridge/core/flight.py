@@ -34,7 +34,13 @@ from bridge.autopilot.params import (
     params_from_table,
 )
 from bridge.autopilot.simvehicle import HOLD, OFFBOARD, SimVehicle
-from bridge.core.overrides import Overrides, laid_file_problem, laid_trace_misfit, table_settings
+from bridge.core.overrides import (
+    Overrides,
+    laid_file_problem,
+    laid_trace_misfit,
+    replaced_laid_problem,
+    table_settings,
+)
 from bridge.core.scalar import checked_choice, compile_for, compiled_needed, compiled_wanted, wire_for
 from bridge.core.weather import handovers_of, weather_of
 from bridge.link.model import (
@@ -260,7 +266,8 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
     idle = (idle_link_key(own, over.link, axes)
             or (None if laid_named else idle_laid_key(src, over.link, flight.link, axes))
             or discretization_refusal(over.discretization, (m.controller,))
-            or scaling_refusal(m, over, flight.wind, axes))
+            or scaling_refusal(m, over, flight.wind, axes)
+            or replaced_laid_problem(over, src, timeline, m.rate_hz))  # a t = 0 wind or link event over a flag's
     if idle:
         raise ConfigError(idle)
     return flight

@@ -8,14 +8,15 @@ Out: an :class:`Overrides` (a type that is wrong raises ``ConfigError`` naming t
      ``--param`` and ``--at``); :meth:`Overrides.laid_over` the mission with them laid over it, validated again by
      the mission; :func:`merged_failsafe_params`, :func:`merged_tables`, how two tables are laid one over the other;
      :func:`laid_file_problem`, :func:`laid_trace_misfit`, a refused trace or profile the ``link`` override laid,
-     named as the flag that laid it (``link_flags``: the flags as typed)
+     named as the flag that laid it (``link_flags``: the flags as typed); :func:`replaced_laid_problem`, a steady
+     wind or link laid over a mission whose event at 0 s replaces it, as the line refusing the flag
 
 Every other value is checked by the part that owns it when :func:`bridge.core.flight.prepare` builds the flight.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from numbers import Integral, Real
 from pathlib import Path
@@ -29,7 +30,7 @@ from missions import Mission
 from missions.mission import law_spec_from
 from params import ConfigError
 from params.text import shown_name
-from plant.events import AT_KEY, event_given, event_table_from_flag
+from plant.events import AT_KEY, TimedEvent, event_given, event_table_from_flag, table_where
 from plant.wind import SCALING, TURBULENCE
 
 
@@ -242,6 +243,78 @@ def laid_trace_misfit(exc: ConfigError, source: str, link: Mapping[str, Any], ov
     else:
         return None
     return f"{laid_flag(place, over.link_flags)} {exc.what}"
+
+
+# a link override's per-direction key -> its flag's stem (bridge.cli.linkflags: LINK_FLAGS and the trace, seed and
+# jitter-distribution flags; tests/test_replaced_flags.py keeps them equal)
+LINK_KEY_STEMS = {"delay_ms": "delay", "jitter_ms": "jitter", "loss_pct": "loss", "burst_len": "burst",
+                  "dup_pct": "dup", "reorder_pct": "reorder", "rate_bps": "bandwidth", "queue_ms": "queue",
+                  "blackouts": "blackout", "trace": "link-trace", "trace_loop": "link-trace-loop",
+                  "jitter": "jitter-dist", "seed": "link-seed"}
+
+
+def _replaced_link_flags(link: Mapping[str, Any], flags: Mapping[str, str] | None) -> list[str]:
+    """The flags that laid ``link``'s settings of the two directions (a handover replaces those whole), as typed where
+    :attr:`Overrides.link_flags` has them, else by the key's own flag (both directions alike: ``--delay``; one:
+    ``--up-delay``; ``--jitter-dist`` and ``--link-seed`` have no direction); a ``--link-profile`` only if it gives no
+    guard key (those stay the flight's). The controller's guard keys are not the link's: not named."""
+    def shown(flag: str, v: Any) -> str:  # the flag with its value (a trace's file, a window's START:DURATION)
+        if isinstance(v, bool) or not isinstance(v, (int, float, str, list, tuple)):
+            return flag
+        if isinstance(v, (list, tuple)):
+            return " ".join(f"{flag} {w[0]:g}:{w[1]:g}" if isinstance(w, (list, tuple)) and len(w) == 2 else flag
+                            for w in v) or flag
+        return f"{flag} {v:g}" if not isinstance(v, str) else f"{flag} {v}" if v else f"{flag} none"
+
+    out: list[str] = []
+    for key, stem in LINK_KEY_STEMS.items():
+        sides = {d: t[key] for d in DIRECTIONS if isinstance(t := link.get(d), Mapping) and key in t}
+        if key in link or (len(sides) == 2 and sides["up"] == sides["down"]) or (sides and key in ("jitter", "seed")):
+            v = link[key] if key in link else next(iter(sides.values()))
+            out.append(shown(laid_flag("trace", flags) if key == "trace" else f"--{stem}", v))
+        else:
+            out += [shown(laid_flag(f"{d}.trace", flags) if key == "trace" else f"--{d}-{stem}", v)
+                    for d, v in sides.items()]
+    profile = link.get("profile")
+    if isinstance(profile, str) and profile:
+        try:
+            guards = {"compensation", "command_lag_ms", "stale_ms", "stop_ms"} & set(load_link_profile(profile).link)
+        except ConfigError:
+            guards = set()  # (a bad profile: refused as such where the link is read)
+        if not guards:
+            out.append(shown(laid_flag("profile", flags), profile))
+    return list(dict.fromkeys(out))
+
+
+def replaced_laid_problem(over: Overrides, source: str, timeline: Sequence[TimedEvent], rate_hz: float) -> str | None:
+    """The line refusing a steady wind (``--wind``, Python's ``wind=`` speed or direction) or a link setting of the
+    two directions (``--delay``, ``--loss``, ``--blackout``, ``--link-trace``, ``--link-profile`` ..., Python's
+    ``link=``) laid over a mission whose timeline (``source``'s ``[[events]]`` and the ``--at`` flags) sets that
+    thing itself at the flight's first control step (an event of kind ``wind``, or a ``link`` handover, acting at
+    step 0: ``t_s = 0``): the event replaces it before anything flies, so it would change nothing, silently. An
+    event later than that leaves it flown until then (docs/weather.md). None."""
+    first = {}
+    for e in timeline:
+        if e.kind in ("wind", "link") and e.step(rate_hz) == 0:
+            first.setdefault(e.kind, e)
+    wind = first.get("wind")
+    if wind is not None and over.wind and {"speed_mps", "from_deg"} & set(over.wind):
+        w = over.wind
+        laid = f"{w.get('speed_mps', 0.0):g}" + (f":{w['from_deg']:g}" if "from_deg" in w else "")
+        return (f"--wind {laid}: changes nothing: {table_where(source, wind)} sets the steady wind ({wind.text()}) "
+                "at the flight's first control step, so the flight never flies the flag's; drop --wind, or give the "
+                "wind in that event (an event at a later time leaves --wind blowing until it)")
+    link = first.get("link")
+    named = _replaced_link_flags(over.link, over.link_flags) if link is not None and over.link else []
+    if named:
+        flags = ", ".join(named)
+        one = len(named) == 1
+        return (f"{flags}: change{'s' if one else ''} nothing: {table_where(source, link)} hands the link over "
+                f"({link.text()}) at the flight's first control step, and a handover replaces both directions' link "
+                f"whole, so the flight never flies {'that flag' if one else 'those flags'}; drop "
+                f"{'it' if one else 'them'}, or give the link in that event (an event at a later time leaves the "
+                "flags' link flown until it)")
+    return None
 
 
 def _check_type(name: str, value: Any, kind: type | tuple[type, ...], what: str) -> None:
