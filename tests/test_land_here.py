@@ -1,0 +1,156 @@
+"""Covers missions.route and bridge.mavlink.missionitems: a NAV_LAND with no latitude and longitude lands where it is.
+
+QGroundControl writes a value not given as null (a .plan) or nan (a waypoint file), and a legacy MISSION_ITEM
+carries it as NaN; PX4 takes a NAV_LAND whose latitude and longitude are NaN as "descend at current position" (its
+own land-here item is one: ``MissionBlock::set_land_item``) and its parser keeps the NaN. Until the forty-fifth
+session the plan reader refused it (``coordinates must be numbers, got lat null, lon null``, exit 2) and the mission
+upload answered it MAV_MISSION_INVALID_PARAM5_X. Now a plan file, a waypoint file and an upload (MISSION_ITEM's NaN,
+MISSION_ITEM_INT's INT32_MAX, MAVLink's "optional") fly it as a land over the point the vehicle is at; one of the
+two given alone is still refused, naming both.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import common as M
+
+from bridge.cli import main
+from bridge.mavlink.missionitems import INT32_MAX, NOT_GIVEN, ItemRefused, item_message, parse_item, plan_of
+from bridge.session import instance_slot
+from missions.geodetic import Home
+from tests.gcskit import command_ack, gcs_link, vehicle_of
+from tests.sitlkit import Proc, clean_exit
+
+pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
+
+HOME = (47.397742, 8.545594, 488.0)  # the vehicle's default home (deg, deg, m AMSL)
+NORTH = 2.0 / 111_194.9  # deg of latitude: about 2 m
+WAYPOINT = Home(*HOME).paper(HOME[0] + NORTH, HOME[1], HOME[2])[:2]  # the waypoint's x, y (m, paper frame)
+
+
+def _plan(land: tuple[Any, Any]) -> dict[str, Any]:
+    """A takeoff to 1 m here (0, 0), a waypoint 2 m north at 1 m, a landing at ``land`` (lat, lon)."""
+    def item(k: int, cmd: int, lat: Any, lon: Any, alt: float) -> dict[str, Any]:
+        return {"autoContinue": True, "command": cmd, "doJumpId": k + 1, "frame": 3, "type": "SimpleItem",
+                "params": [0, 0, 0, None, lat, lon, alt]}
+
+    return {"fileType": "Plan", "version": 1, "groundStation": "QGroundControl", "geoFence": {"version": 2},
+            "rallyPoints": {"version": 2, "points": []},
+            "mission": {"version": 2, "firmwareType": 12, "vehicleType": 2, "cruiseSpeed": 15, "hoverSpeed": 5,
+                        "plannedHomePosition": list(HOME),
+                        "items": [item(0, 22, 0, 0, 1.0), item(1, 16, HOME[0] + NORTH, HOME[1], 1.0),
+                                  item(2, 21, *land, 0.0)]}}
+
+
+def _last_row(run: Path) -> dict[str, float]:
+    lines = (run / "trace.csv").read_text().splitlines()
+    return {k: float(v) for k, v in zip(lines[0].split(","), lines[-1].split(","), strict=False)}
+
+
+def _landed_at_the_waypoint(run: Path) -> None:
+    end = _last_row(run)
+    assert math.dist((end["x"], end["y"]), WAYPOINT) < 0.05, (end["x"], end["y"], WAYPOINT)
+    assert end["z"] < 0.01, end["z"]
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["outcome"] == "completed" and summary["end"]["disarmed"], summary["outcome"]
+
+
+@pytest.mark.parametrize("kind", ["plan", "waypoints"])
+def test_a_files_land_with_no_position_lands_where_it_is(capsys: Any, tmp_path: Path, kind: str) -> None:
+    """A .plan's null, null and a waypoint file's nan, nan: the flight lands under the waypoint, not at the home."""
+    if kind == "plan":
+        path = tmp_path / "here.plan"
+        path.write_text(json.dumps(_plan((None, None)), indent=4))
+    else:
+        path = tmp_path / "here.waypoints"
+        path.write_text("QGC WPL 110\n"
+                        f"0\t1\t0\t16\t0\t0\t0\t0\t{HOME[0]}\t{HOME[1]}\t{HOME[2]}\t1\n"
+                        "1\t0\t3\t22\t0\t0\t0\tnan\t0\t0\t1.0\t1\n"
+                        f"2\t0\t3\t16\t0\t0\t0\tnan\t{HOME[0] + NORTH!r}\t{HOME[1]}\t1.0\t1\n"
+                        "3\t0\t3\t21\t0\t0\t0\tnan\tnan\tnan\t0\t1\n")
+    out = tmp_path / "run"
+    assert main(["sim", str(path), "--no-plots", "--out", str(out)]) == 0, capsys.readouterr().err
+    _landed_at_the_waypoint(out)
+
+
+def test_a_land_with_one_of_the_two_given_is_refused_naming_both(capsys: Any, tmp_path: Path) -> None:
+    path = tmp_path / "half.plan"
+    path.write_text(json.dumps(_plan((None, HOME[1]))))
+    assert main(["sim", str(path), "--no-plots", "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"bsst: {path}: mission.items[2] (NAV_LAND (21)): latitude null, longitude {HOME[1]}: give both "
+                   "(the landing point) or neither (both null: land where it is)"], err
+
+
+def _legacy(seq: int, cmd: int, lat: float, lon: float, alt: float) -> Any:
+    return M.MAVLink_mission_item_message(0, 0, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT, cmd, 0, 1, 0.0, 0.0, 0.0,
+                                          math.nan, lat, lon, alt, 0)
+
+
+def _int(seq: int, cmd: int, x: int, y: int, alt: float) -> Any:
+    return M.MAVLink_mission_item_int_message(0, 0, seq, M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, cmd, 0, 1, 0.0, 0.0,
+                                              0.0, math.nan, x, y, alt, 0)
+
+
+def test_the_parser_takes_a_land_with_no_position_and_sends_it_back_as_given() -> None:
+    """MISSION_ITEM NaN, NaN and MISSION_ITEM_INT INT32_MAX, INT32_MAX on a NAV_LAND: held as NOT_GIVEN, downloaded
+    as each form writes "not given", and flown as a land here (plan_of: NaN, NaN). On a waypoint, or one of the two
+    alone, refused as before."""
+    for msg, int_mode in ((_legacy(2, M.MAV_CMD_NAV_LAND, math.nan, math.nan, 0.0), False),
+                          (_int(2, M.MAV_CMD_NAV_LAND, INT32_MAX, INT32_MAX, 0.0), True)):
+        it = parse_item(msg, int_mode)
+        assert (it.x, it.y) == NOT_GIVEN
+        back = item_message(it, (255, 190), False, False)
+        assert math.isnan(back.x) and math.isnan(back.y)
+        back = item_message(it, (255, 190), False, True)
+        assert (back.x, back.y) == (INT32_MAX, INT32_MAX)
+        plan = plan_of((it,), HOME, "held")
+        assert math.isnan(plan.items[0].lat) and math.isnan(plan.items[0].lon)
+    for msg, int_mode, result in (
+            (_legacy(2, M.MAV_CMD_NAV_LAND, math.nan, HOME[1], 0.0), False, M.MAV_MISSION_INVALID_PARAM5_X),
+            (_legacy(2, M.MAV_CMD_NAV_LAND, HOME[0], math.nan, 0.0), False, M.MAV_MISSION_INVALID_PARAM6_Y),
+            (_legacy(2, M.MAV_CMD_NAV_WAYPOINT, math.nan, math.nan, 1.0), False, M.MAV_MISSION_INVALID_PARAM5_X),
+            (_int(2, M.MAV_CMD_NAV_WAYPOINT, INT32_MAX, INT32_MAX, 1.0), True, M.MAV_MISSION_INVALID_PARAM5_X)):
+        with pytest.raises(ItemRefused) as exc:
+            parse_item(msg, int_mode)
+        assert exc.value.result == result
+
+
+def test_an_uploaded_land_with_no_position_is_flown_where_it_is(tmp_path: Path) -> None:
+    """A pymavlink ground station uploads legacy MISSION_ITEMs (a takeoff here, the waypoint, a land at NaN, NaN) to
+    ``bsst sitl --await-mission`` (lockstep) and starts it: ACCEPTED, flown, landed under the waypoint."""
+    items = [_legacy(0, M.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 1.0),
+             _legacy(1, M.MAV_CMD_NAV_WAYPOINT, HOME[0] + NORTH, HOME[1], 1.0),
+             _legacy(2, M.MAV_CMD_NAV_LAND, math.nan, math.nan, 0.0)]
+    out = tmp_path / "run"
+    with instance_slot() as n:
+        gcs = gcs_link(n)
+        sitl = Proc.bsst("sitl", "--await-mission", "--speed", "0", "--instance", str(n), "--out", str(out),
+                         "--no-plots", "--param", "COM_DISARM_LAND=0.5")
+        try:
+            target = vehicle_of(gcs)
+            gcs.mav.mission_count_send(*target, len(items), 0)
+            while (m := gcs.recv_match(type=["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"], blocking=True,
+                                       timeout=10)) is not None and m.get_type() != "MISSION_ACK":
+                items[m.seq].target_system, items[m.seq].target_component = target
+                gcs.mav.send(items[m.seq])  # (legacy items: the vehicle asks with MISSION_REQUEST, as PX4 does)
+            assert m is not None and m.type == M.MAV_MISSION_ACCEPTED, m  # INVALID_PARAM5_X on the old code
+            gcs.mav.command_long_send(*target, M.MAV_CMD_MISSION_START, 0, 0, 0, 0, 0, 0, 0, 0)
+            assert command_ack(gcs, M.MAV_CMD_MISSION_START).result == M.MAV_RESULT_ACCEPTED
+            rc = sitl.p.wait(timeout=120)
+        finally:
+            gcs.close()
+            sitl.stop()
+    summary = json.loads((out / "summary.json").read_text())
+    assert rc == clean_exit(summary), "\n".join(sitl.lines[-30:])
+    # the waypoint as a MISSION_ITEM carried it: float32 degrees (about 0.2 m apart)
+    at = Home(*HOME).paper(float(np.float32(HOME[0] + NORTH)), float(np.float32(HOME[1])), HOME[2])[:2]
+    end = _last_row(out)
+    assert math.dist((end["x"], end["y"]), at) < 0.05, (end["x"], end["y"], at)
+    assert end["z"] < 0.01 and summary["outcome"] == "completed", summary["outcome"]
