@@ -138,9 +138,26 @@ def _point(z: Table, key: str, i: int, p: Any) -> tuple[float, float]:
     return xy[0], xy[1]  # type: ignore[return-value]
 
 
+# what QGroundControl's plan loader does with a plan's object given without a version (src/MissionManager:
+# GeoFenceController::load ignores it, "old version 1 or prior data", and loads the plan with no fence;
+# RallyPointController::load requires the key and refuses the plan), and what to do, for the refusal
+NO_VERSION = {
+    "geoFence": ("QGroundControl's plan loader (GeoFenceController::load) takes a geoFence without a version for old "
+                 "data and ignores it: the plan it loads has no fence, where this one draws zones; give "
+                 "\"version\": 2 (as QGroundControl writes it) to fly them, or remove them"),
+    "rallyPoints": ("QGroundControl's plan loader (RallyPointController::load) requires it and refuses the plan; give "
+                    "\"version\": 2 (as QGroundControl writes it)"),
+}
+
+
 def plan_object_keys(raw: Mapping[str, Any], source: str, name: str, keys: tuple[str, ...]) -> None:
     """Refuse a plan's ``name`` object (``geoFence``, ``rallyPoints``) of a ``version`` other than QGroundControl's 2,
-    or with a key not in ``keys``: either was read as no zones or no points, and flown without them."""
+    or with a key not in ``keys``: either was read as no zones or no points, and flown without them. One without a
+    ``version`` is QGroundControl's to say (its plan loader, :data:`NO_VERSION`): a ``geoFence`` it ignores, so one
+    holding zones is refused (with none, it is read as QGroundControl reads it: no fence); ``rallyPoints`` it refuses.
+    """
+    if "version" not in raw and (name != "geoFence" or any(raw.get(k) for k in ("polygons", "circles"))):
+        raise ConfigError(f"{source}: {name}.version: missing: {NO_VERSION[name]}")
     v = raw.get("version", 2)
     if isinstance(v, bool) or v != 2:
         raise ConfigError(f"{source}: {name}.version: version {json_show(v)} not supported (2 is, as QGroundControl "

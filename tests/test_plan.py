@@ -148,8 +148,20 @@ def test_every_command_a_refusal_names_is_named_as_mavlinks_common_xml_names_it(
                                                                   "an integer of 401 digits"]),
     (lambda d: d["mission"].update(plannedHomePosition=[math.inf, 8.5, 488]), ["plannedHomePosition", "inf"]),
     (lambda d: d.update(geoFence={"circles": [{"circle": {"center": [10**400, 8.5], "radius": 5}, "inclusion": True}],
-                                  "polygons": []}), ["geoFence.circles[0]", "latitude an integer of 401 digits"]),
-    (lambda d: d.update(rallyPoints={"points": [[47.3978, 8.5456, math.inf]]}), ["rallyPoints.points[0]", "finite"]),
+                                  "polygons": [], "version": 2}), ["geoFence.circles[0]",
+                                                                   "latitude an integer of 401 digits"]),
+    (lambda d: d.update(rallyPoints={"points": [[47.3978, 8.5456, math.inf]], "version": 2}),
+     ["rallyPoints.points[0]", "finite"]),
+    # a geoFence with zones but no version: QGroundControl's loader ignores it (no fence), so it is refused; rally
+    # points with none: its loader refuses them (both were read as version 2 until the forty-fifth session)
+    (lambda d: d.update(geoFence={"circles": [{"circle": {"center": [47.397742, 8.545594], "radius": 50},
+                                               "inclusion": True}], "polygons": []}),
+     ["geoFence.version: missing: QGroundControl's plan loader (GeoFenceController::load) takes a geoFence without a "
+      "version for old data and ignores it: the plan it loads has no fence, where this one draws zones; give "
+      '"version": 2']),
+    (lambda d: d.update(rallyPoints={"points": [[47.3978, 8.5456, 490]]}),
+     ["rallyPoints.version: missing: QGroundControl's plan loader (RallyPointController::load) requires it and "
+      "refuses the plan"]),
     # a hold time is flown: null (NaN) is refused as -5 is; a null yaw (param4) is QGroundControl's "not given"
     (lambda d: d["mission"]["items"][2].update(command=19, params=[None, 0, 0, None, 47.3979219, 8.5458597, 10]),
      ["mission.items[2]", "NAV_LOITER_TIME (19)", "hold time (param1) null", "[0, 3600]"]),
@@ -181,6 +193,13 @@ def test_refusals_name_the_file_the_item_and_its_command(tmp_path: Path, edit, w
     assert why.startswith(str(p)) and "\n" not in why
     for w in words:
         assert w in why
+
+
+def test_a_geofence_without_a_version_or_zones_is_read_as_qgroundcontrol_reads_it(tmp_path: Path) -> None:
+    """No version and no zone: QGroundControl's GeoFenceController::load ignores it and loads the plan with no fence;
+    so does this reader (refusing it would refuse what loses nothing). With a zone it is refused (above)."""
+    p = write_plan(tmp_path, lambda d: d.update(geoFence={"circles": [], "polygons": []}))
+    assert load_mission(p).geofence is None
 
 
 def test_a_plan_naming_a_key_twice_is_refused(tmp_path: Path) -> None:

@@ -78,12 +78,12 @@ def fence_plan(items: tuple[MissionItem, ...]) -> dict[str, Any]:
             i += n
             continue
         i += 1  # (a return point: held, not a zone)
-    return {"polygons": polygons, "circles": circles}
+    return {"version": 2, "polygons": polygons, "circles": circles}
 
 
 def rally_plan(items: tuple[MissionItem, ...]) -> dict[str, Any]:
     """Held rally points as a plan's ``rallyPoints`` object ([lat, lon, alt] each: deg, deg, m as sent)."""
-    return {"points": [[it.lat_deg, it.lon_deg, float(it.z)] for it in items]}
+    return {"version": 2, "points": [[it.lat_deg, it.lon_deg, float(it.z)] for it in items]}
 
 
 def _global_item(seq: int, frame: int, command: int, param1: float, home: Home, x_m: float, y_m: float) -> MissionItem:
