@@ -46,7 +46,7 @@ def _refused(capsys: Any, tmp_path: Path, *argv: str) -> str:
 
 @pytest.mark.parametrize(("flags", "named", "kind"), [
     (("--wind", "10"), "--wind 10:0: changes nothing", "wind"),
-    (("--wind", "4:270", "--turbulence", "light"), "--wind 4:270: changes nothing", "wind"),
+    (("--wind", "4:270"), "--wind 4:270: changes nothing", "wind"),
     (("--delay", "40"), "--delay 40: changes nothing", "link"),
     (("--up-loss", "5", "--down-delay", "30"), "--down-delay 30, --up-loss 5: change nothing", "link"),
     (("--link-profile", "wifi"), "--link-profile wifi: changes nothing", "link"),
@@ -91,6 +91,16 @@ def test_a_later_event_leaves_the_flags_flown_until_it(capsys: Any, tmp_path: Pa
     assert delays["p50"] == pytest.approx(5.0) or delays["p50"] == pytest.approx(40.0), delays
     assert delays["max"] == pytest.approx(40.0), delays
     assert 1.5 < s["wind"]["mean_speed_mps"] < 4.5, s["wind"]  # both winds flown, each about half the flight
+
+
+def test_a_wind_flown_with_turbulence_is_its_pass_speed_and_kept(capsys: Any, tmp_path: Path) -> None:
+    """With turbulence the steady wind's speed and direction also set the turbulence's pass speed and axes, which a
+    wind event (the steady wind alone) leaves as they are: --wind acts, and is taken."""
+    out = tmp_path / "run"
+    assert main(["sim", str(_mission(tmp_path, 0.0)), "--wind", "10", "--turbulence", "moderate", "--no-plots",
+                 "--out", str(out)]) == 0, capsys.readouterr()
+    wind = json.loads((out / "summary.json").read_text())["wind"]
+    assert wind["dryden"]["pass_speed_mps"] == 10.0 and wind["mean_speed_mps"] == pytest.approx(1.0), wind
 
 
 def test_a_guard_flag_is_kept_by_a_t0_handover(capsys: Any, tmp_path: Path) -> None:

@@ -267,7 +267,8 @@ def prepare(mission: Mission | str | Path, overrides: Overrides | None = None, *
             or (None if laid_named else idle_laid_key(src, over.link, flight.link, axes))
             or discretization_refusal(over.discretization, (m.controller,))
             or scaling_refusal(m, over, flight.wind, axes)
-            or replaced_laid_problem(over, src, timeline, m.rate_hz))  # a t = 0 wind or link event over a flag's
+            or replaced_laid_problem(over, src, timeline, m.rate_hz,  # a t = 0 wind or link event over a flag's
+                                     flight.wind is not None and flight.wind.turbulence != "none"))
     if idle:
         raise ConfigError(idle)
     return flight

@@ -286,24 +286,28 @@ def _replaced_link_flags(link: Mapping[str, Any], flags: Mapping[str, str] | Non
     return list(dict.fromkeys(out))
 
 
-def replaced_laid_problem(over: Overrides, source: str, timeline: Sequence[TimedEvent], rate_hz: float) -> str | None:
+def replaced_laid_problem(over: Overrides, source: str, timeline: Sequence[TimedEvent], rate_hz: float,
+                          turbulent: bool = False) -> str | None:
     """The line refusing a steady wind (``--wind``, Python's ``wind=`` speed or direction) or a link setting of the
     two directions (``--delay``, ``--loss``, ``--blackout``, ``--link-trace``, ``--link-profile`` ..., Python's
     ``link=``) laid over a mission whose timeline (``source``'s ``[[events]]`` and the ``--at`` flags) sets that
     thing itself at the flight's first control step (an event of kind ``wind``, or a ``link`` handover, acting at
     step 0: ``t_s = 0``): the event replaces it before anything flies, so it would change nothing, silently. An
-    event later than that leaves it flown until then (docs/weather.md). None."""
+    event later than that leaves it flown until then (docs/weather.md). A steady wind is not refused where the flight
+    flies turbulence (``turbulent``): its speed and direction set the turbulence's pass speed and axes, which the
+    event (the steady wind alone) leaves as they are. None."""
     first = {}
     for e in timeline:
         if e.kind in ("wind", "link") and e.step(rate_hz) == 0:
             first.setdefault(e.kind, e)
     wind = first.get("wind")
-    if wind is not None and over.wind and {"speed_mps", "from_deg"} & set(over.wind):
+    if wind is not None and not turbulent and over.wind and {"speed_mps", "from_deg"} & set(over.wind):
         w = over.wind
         laid = f"{w.get('speed_mps', 0.0):g}" + (f":{w['from_deg']:g}" if "from_deg" in w else "")
         return (f"--wind {laid}: changes nothing: {table_where(source, wind)} sets the steady wind ({wind.text()}) "
-                "at the flight's first control step, so the flight never flies the flag's; drop --wind, or give the "
-                "wind in that event (an event at a later time leaves --wind blowing until it)")
+                "at the flight's first control step, and no turbulence is flown (whose pass speed and axes it would "
+                "set), so the flight never flies the flag's; drop --wind, or give the wind in that event (an event at "
+                "a later time leaves --wind blowing until it)")
     link = first.get("link")
     named = _replaced_link_flags(over.link, over.link_flags) if link is not None and over.link else []
     if named:
