@@ -41,14 +41,14 @@ def _said(events: list[dict]) -> list[tuple[float, str, str]]:
 
 def test_a_battery_return_10_m_from_home_at_4_m_climbs_only_to_the_cone_and_lands_intact_in_lockstep(
         tmp_path: Path) -> None:
-    """Up to 4 m in 3 s, 10 m north by 8 s: from 8.2 % the critical level (7 %) comes at 9.168 s, 10 m north at 4 m
+    """Up to 4 m in 3 s, 10 m north by 8 s: from 8.2 % the critical level (7 %) comes at 9.164 s, 10 m north at 4 m
     (its estimate inside RTL_MIN_DIST): Return climbs to the cone's height there, d / tan 45 deg (about 10 m;
     RTL_RETURN_ALT is 30 m), flies home and lands; the emergency level (5 %) lands it where it has got to; it touches
     down within a metre of home below 1 m/s, disarmed COM_DISARM_LAND (2 s) later, nothing hit. ``bsst sitl`` (exit 1,
     outcome ``failsafe``) says and flies what ``bsst sim`` does: the same events at the same times, the trace within
-    the float32 wire's 1e-4 m. (The audit's mission from 9.5 % flew the same, 10 s later: critical at 19.496 s,
-    disarmed at 42.134 s, a 43 s flight in each twin; this one is 32 s.)"""
-    # disarmed at 31.446 s: nothing after it is read but the last row, on the ground
+    the float32 wire's 1e-4 m. (The audit's mission from 9.5 % flew the same, 10 s later: critical at 19.468 s,
+    disarmed at 42.108 s, a 43 s flight in each twin; this one is 32 s.)"""
+    # disarmed at 31.427 s: nothing after it is read but the last row, on the ground
     mission = _mission(tmp_path, 8.2, 32.0, up=(3.0, 4.0), north=(8.0, 10.0))
     offline = simulate(mission, plots=False, params={"COM_LOW_BAT_ACT": 3}, **SENSED)
     with instance_slot() as n:
@@ -83,18 +83,18 @@ def test_a_battery_return_10_m_from_home_at_4_m_climbs_only_to_the_cone_and_land
 
 def test_the_audits_return_from_just_beyond_rtl_min_dist_lands_intact_and_at_land_speed_would_not(
         tmp_path: Path) -> None:
-    """The audit's flight offline: from 17 % the critical level comes at 78.808 s after a minute of holding, the EKF's
-    estimate 10.03 m from home: beyond RTL_MIN_DIST (10 m), so Return climbs toward RTL_RETURN_ALT, as PX4 1.14 does,
-    until the emergency level (93.976 s, 26.75 m) lands it; coming down at 1.5 m/s above 10 m it is on the ground at
-    117.071 s, intact, and disarms COM_DISARM_LAND (2 s) later. The same flight with MPC_Z_V_AUTO_DN 0.7 m/s
+    """The audit's flight offline: from 17 % the critical level comes at 78.784 s after a minute of holding, the EKF's
+    estimate 10.04 m from home: beyond RTL_MIN_DIST (10 m), so Return climbs toward RTL_RETURN_ALT, as PX4 1.14 does,
+    until the emergency level (93.960 s, 26.77 m) lands it; coming down at 1.5 m/s above 10 m it is on the ground at
+    117.063 s, intact, and disarms COM_DISARM_LAND (2 s) later. The same flight with MPC_Z_V_AUTO_DN 0.7 m/s
     (MPC_LAND_SPEED the whole way, the landing before) runs out of pack on the way down and hits the ground hard."""
     mission = _mission(tmp_path, 17.0, 125.0)
     run = simulate(mission, plots=False, params={"COM_LOW_BAT_ACT": 3}, **SENSED)
     said = _said(run.summary["events"])
     assert [(round(t, 3), k) for t, k, _ in said if k != "battery"] == [
-        (78.808, "failsafe"), (93.976, "failsafe"), (117.071, "landed"), (119.071, "disarmed")], said
+        (78.784, "failsafe"), (93.960, "failsafe"), (117.063, "landed"), (119.063, "disarmed")], said
     tr = run.trace
-    i = int(np.searchsorted(tr["t"], 78.808 - 1e-9))
+    i = int(np.searchsorted(tr["t"], 78.784 - 1e-9))
     assert float(np.hypot(tr["x_est"][i], tr["y_est"][i])) > 10.0  # beyond RTL_MIN_DIST by its estimate
     assert 26.5 < float(tr["z"].max()) < 27.0
     slow = simulate(mission, plots=False, params={"COM_LOW_BAT_ACT": 3, "MPC_Z_V_AUTO_DN": 0.7}, **SENSED)

@@ -33,6 +33,7 @@ from bridge.autopilot.estimator import (
 )
 from bridge.core.flight import prepare
 from bridge.sweep.cells import ripple_rms
+from plant.alignment import aligned_start, alignment_variances
 from plant.sensors import IDEAL, Measurement, SensorConfig, SensorSuite, rotation
 
 SINE = "missions/sine.toml"
@@ -239,6 +240,27 @@ def test_make_estimator_builds_each_kind_and_refuses_others() -> None:
     assert isinstance(make_estimator("ekf", cfg, (0.0,) * 12, 9.81, lambda: (0.0,) * 12), Ekf)
     with pytest.raises(ValueError, match="estimator must be one of truth, ekf, raw; got 'ukf'"):
         make_estimator("ukf", cfg, (0.0,) * 12, 9.81, lambda: (0.0,) * 12)
+
+
+def test_the_ekf_starts_with_what_its_readings_at_rest_tell_it() -> None:
+    """plant.alignment: 10 s on the pad. gnss: height from 500 barometer readings of 0.2 m and 50 fixes of 2 m (σ 9 mm),
+    the horizontal from 50 fixes of 1 m (0.14 m); P0 is those variances (it was one fix's: 1 m and 2 m). The start
+    drawn from them is seeded: x, y where the vehicle stands, the height and attitude off by a draw, at rest."""
+    f = prepare(SINE)
+    cfg, g = f.profile.sensor_set("gnss"), f.profile.gravity
+    pos, z, tilt, psi = alignment_variances(cfg, g)
+    assert math.sqrt(pos) == pytest.approx(1.0 / math.sqrt(50))
+    assert math.sqrt(z) == pytest.approx(1.0 / math.sqrt(500 / 0.2**2 + 50 / 2.0**2))  # 8.9 mm
+    assert math.sqrt(tilt) < 1e-3 and psi is not None and math.sqrt(psi) == pytest.approx(0.02 / math.sqrt(1000))
+    P = Ekf(cfg, (0.0,) * 12, g).P
+    assert (P[0, 0], P[1, 1], P[2, 2]) == pytest.approx((pos, pos, z))
+    start = (1.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0)
+    a, b = aligned_start(cfg, g, start, 0), aligned_start(cfg, g, start, 1)
+    assert a == aligned_start(cfg, g, start, 0) and a != b
+    for s in (a, b):
+        assert s[0] == 1.0 and s[2] == 2.0 and s[1] == s[3] == s[5] == s[7] == s[9] == s[11] == 0.0
+        assert abs(s[4]) < 5 * math.sqrt(z) and abs(s[10] - 0.5) < 5 * math.sqrt(psi)
+    assert aligned_start(f.profile.sensor_set("ideal"), g, start, 0) == start  # exact readings: nothing to draw
 
 
 # -- the covariance as ODOMETRY wants it -----------------------------------------------------------

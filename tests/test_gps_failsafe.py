@@ -172,7 +172,7 @@ def test_mavsdk_sees_the_gps_lost_the_descent_and_the_position_back(tmp_path):
 def test_the_product_fault_event_fails_safe_in_lockstep_as_offline(tmp_path):
     """``--sensors gnss --estimator ekf --at 2:gps:off`` on the sine cut to 11 s: ``bsst sim`` and a lockstep ``bsst
     sitl`` both end ``failsafe``, exit 1, the position lost and PX4's Descend at 7.124 s (EKF2_NOAID_TOUT after the
-    fault) and the disarm on the ground at 10.655 s (2 s after the touchdown, COM_DISARM_LAND) in both; the summary's
+    fault) and the disarm on the ground at 10.656 s (2 s after the touchdown, COM_DISARM_LAND) in both; the summary's
     ``ended_by`` names the position loss and the fault; the trace the same. (The docs' ``--at 10:gps:off`` on the
     sine cut to 20 s flew the same, 8 s later: 20 s in each twin; this one 11 s.)"""
     sine = tmp_path / "sine11.toml"
@@ -191,7 +191,7 @@ def test_the_product_fault_event_fails_safe_in_lockstep_as_offline(tmp_path):
     events = [[(e["t"], e["kind"], e["text"].split(" [by ")[0]) for e in s["events"] if e["kind"] in mine
                and e.get("source", "vehicle") == "vehicle"] for s in summaries]
     assert events[0] == events[1] and [(t, k) for t, k, _ in events[0]] == [
-        (2.0, "fault"), (7.124, "position"), (7.124, "failsafe"), (10.655, "disarmed")], events
+        (2.0, "fault"), (7.124, "position"), (7.124, "failsafe"), (10.656, "disarmed")], events
     assert sitl["outcome"] == offline["outcome"] == "failsafe"
     assert sitl["ended_by"] == offline["ended_by"] == {
         "who": "vehicle", "how": "failsafe at t=7.124 s: position lost: level and descend",
@@ -237,15 +237,15 @@ def test_a_gps_lost_in_the_end_landing_lands_in_descend_in_lockstep_as_offline(t
 
 
 def test_a_gps_lost_after_the_touchdown_keeps_the_auto_disarm_wait(tmp_path):
-    """``--at 29.99999:gps:off``: the end landing touches down at 34.372 s and the position is lost at 35.124 s, on
+    """``--at 29.99999:gps:off``: the end landing touches down at 34.371 s and the position is lost at 35.124 s, on
     the ground. PX4's failsafe switches to Descend, but its auto-disarm counts from the land detector: the disarm
-    comes at 36.372 s, COM_DISARM_LAND after the touchdown (it used to come at once, with the failsafe)."""
+    comes at 36.371 s, COM_DISARM_LAND after the touchdown (it used to come at once, with the failsafe)."""
     out = tmp_path / "sim"
     r = run_bsst("sim", ROOT / "missions" / "sine.toml", "--sensors", "gnss", "--estimator", "ekf", "--at",
                  "29.99999:gps:off", "--out", str(out), "--no-plots", env=ENV, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     summary = json.loads((out / "summary.json").read_text())
     assert [(t, k) for t, k, _ in _vehicle_events(summary, ("landed", "failsafe", "disarmed"))] == [
-        (34.372, "landed"), (35.124, "failsafe"), (36.372, "disarmed")]
-    assert summary["outcome"] == "completed" and summary["end"]["landing_s"] == 6.372
+        (34.371, "landed"), (35.124, "failsafe"), (36.371, "disarmed")]
+    assert summary["outcome"] == "completed" and summary["end"]["landing_s"] == 6.371
     assert summary["end"]["failsafe"] == "position lost: level and descend"

@@ -68,9 +68,13 @@ The correction δx = K r is injected into the nominal state (R̂ ← Exp(δθ)·
 gyro ω_m − b̂_g through the Z-Y-X kinematics (:func:`plant.sensors.euler_rates`); at a time after
 the last IMU sample, carried forward at constant velocity and rates.
 
-*Initial state*: the given start (a vehicle at rest on its start point); P0 = diag of σ² with
-position the sensor's σ (at least 1 cm), velocity 1 cm/s, attitude 10 mrad, gyro bias 1 mrad/s,
-accelerometer bias 0.05 m/s².
+*Initial state*: the given start, which the vehicle's loop takes from its sensors at rest
+(:func:`plant.alignment.aligned_start`: the mean of its readings over 10 s on its pad, as EKF2 has them by
+take-off); P0 = diag of σ² with position the σ of those means (:func:`plant.alignment.alignment_variances`,
+each reading's σ floored: the gnss set's height 9 mm, its horizontal 0.14 m), velocity 1 cm/s, attitude
+10 mrad (the tilt an accelerometer bias of 0.05 m/s² hides), gyro bias 1 mrad/s, accelerometer bias 0.05 m/s².
+Until the forty-fifth session the position's σ was one reading's (gnss: 2 m of height), the first fix pulled the
+exact start half way to itself (0.29 m up on the sine, seed 0) and the barometer took seconds to bring it back.
 
 **Offline harness.** :func:`bridge.autopilot.closedloop.fly_closed_loop` flies plant, sensors,
 an estimator and a :class:`~controller.Controller` fed the estimate (or the truth) with the vehicle
@@ -96,6 +100,7 @@ import numpy as np
 
 from bridge.autopilot.cholesky import weighted_square
 from bridge.autopilot.compiling import announce_compiling, cache_off
+from plant.alignment import alignment_variances
 from plant.sensors import (
     BARO,
     GNSS,
@@ -350,9 +355,8 @@ class Ekf:
         x[k.X_PSI] = X[10]  # the output's continuous heading
         x[k.X_AF + 2] = gravity  # specific force in the paper frame (M f) at rest
         x[k.X_GVAR] = ng2 * min(c.imu_rate_hz, 1e4)  # white variance of one gyro sample (set per sample)
-        s_pos = max(c.position_noise_m, 0.01)
-        s_z = max(c.position_noise_z_m, 0.01)
-        self.P = np.diag([s_pos**2, s_pos**2, s_z**2] + [1e-4] * 3 + [1e-4] * 3 + [1e-6] * 3 + [0.05**2] * 3)
+        v_pos, v_z, _, _ = alignment_variances(c, gravity, f)  # what its readings at rest told it (plant.alignment)
+        self.P = np.diag([v_pos, v_pos, v_z] + [1e-4] * 3 + [1e-4] * 3 + [1e-6] * 3 + [0.05**2] * 3)
         latency = c.position_latency_ms / 1000.0
         depth = int(math.ceil((latency + 0.05) * min(c.imu_rate_hz, 1e4))) + 4  # IMU samples over the latency
         self._hist = np.zeros((depth, k.HIST_COLS))  # the nominal state at each IMU sample, newest last

@@ -60,6 +60,7 @@ from missions import Mission, Setpoint, Sine, Step, load_mission
 from missions.airframe import fitted_to_airframe
 from params import ConfigError, Table
 from plant import Effects, Profile, Quadrotor, load_profile
+from plant.alignment import aligned_start
 from plant.effects import effects_from_table
 from plant.events import TimedEvent
 from plant.profiles import sensors_from_table
@@ -124,7 +125,10 @@ class Flight:
         if self.estimator == "truth":  # no sensors to sample: the plant's state is published as it is
             return SimVehicle(plant, self.substeps, self.failsafe, **settings)
         suite = SensorSuite(self.sensors, m.seed, m.physics_hz, self.profile.gravity)
-        est = make_estimator(self.estimator, self.sensors, plant.state, self.profile.gravity, lambda: plant.state)
+        start = plant.state
+        if self.estimator == "ekf":  # an EKF has averaged its readings on the pad before its clock starts
+            start = aligned_start(self.sensors, self.profile.gravity, plant.state, m.seed)
+        est = make_estimator(self.estimator, self.sensors, start, self.profile.gravity, lambda: plant.state)
         return SimVehicle(plant, self.substeps, self.failsafe, sensors=suite, estimator=est, **settings)
 
     def make_controller(self) -> Controller:
