@@ -8,7 +8,8 @@ Out: a :class:`Route`: the knots (t s; x, y, z m and psi rad in the paper frame 
      before it is timed. What cannot be flown is a :class:`params.ConfigError`
      naming the file, the item and its command
 
-The vehicle starts at rest on the ground at the home. NAV_TAKEOFF climbs over where it is and stops;
+The vehicle starts at rest on the ground at the home. NAV_TAKEOFF climbs over where it is and stops (then flies to
+its point, if it gives one other than 0, 0 or NaN, NaN);
 NAV_WAYPOINT passes through (stops when it holds: param1 s); NAV_LOITER_TIME stops and holds param1 s;
 NAV_LAND flies over its point (here if its latitude and longitude are 0, or both NaN), stops, and descends to the
 ground; NAV_RETURN_TO_LAUNCH flies over the home at its altitude, stops and lands; nothing may follow a
@@ -151,16 +152,19 @@ def _hold(plan: PlanFile, item: Item) -> float:
     return h
 
 
-def _lands_here(plan: PlanFile, item: Item) -> bool:
-    """Whether ``item`` is a NAV_LAND whose latitude and longitude are both not given (NaN: a plan's null, a waypoint
-    file's nan, a legacy MISSION_ITEM's NaN): PX4 lands it where the vehicle is (its own land-here item is one:
-    ``MissionBlock::set_land_item``, "descend at current position"), as one at 0, 0; its altitude is not used (it
-    descends to the ground). One of the two not given is refused, naming both."""
-    if item.command != NAV_LAND or not (math.isnan(item.lat) or math.isnan(item.lon)):
+def _here(plan: PlanFile, item: Item) -> bool:
+    """Whether ``item`` is a NAV_LAND or NAV_TAKEOFF whose latitude and longitude are both not given (NaN: a plan's
+    null, a waypoint file's nan, a legacy MISSION_ITEM's NaN): PX4 flies it where the vehicle is, as one at 0, 0 (its
+    own land-here item is one: ``MissionBlock::set_land_item``, "descend at current position"; its flight task holds
+    the position of a setpoint without latitude and longitude: ``FlightTaskAuto``, "No position provided in xy. Lock
+    position"). A land's altitude is not used (it descends to the ground); a takeoff's is. One of the two not given
+    is refused, naming both."""
+    if item.command not in (NAV_LAND, NAV_TAKEOFF) or not (math.isnan(item.lat) or math.isnan(item.lon)):
         return False
     if not (math.isnan(item.lat) and math.isnan(item.lon)):
+        point, here = ("landing point", "land") if item.command == NAV_LAND else ("takeoff point", "take off")
         raise plan.refuse(item, f"latitude {plan.shown(item.lat)}, longitude {plan.shown(item.lon)}: give both (the "
-                                f"landing point) or neither (both {plan.nan_word}: land where it is)")
+                                f"{point}) or neither (both {plan.nan_word}: {here} where it is)")
     return True
 
 
@@ -193,7 +197,7 @@ def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[St
             add(0.0, 0.0, 0.0, math.nan, True, 0.0, item.label)
             landed_by = item
             continue
-        if cmd in (NAV_LAND, NAV_TAKEOFF) and item.lat == 0.0 and item.lon == 0.0 or _lands_here(plan, item):
+        if cmd in (NAV_LAND, NAV_TAKEOFF) and item.lat == 0.0 and item.lon == 0.0 or _here(plan, item):
             x, y = here.x, here.y  # no position given: where it is
             z = 0.0 if cmd == NAV_LAND else _local(plan, home, replace(item, lat=home.lat, lon=home.lon),
                                                    envelope_m)[2]

@@ -1,4 +1,5 @@
-"""Covers missions.route and bridge.mavlink.missionitems: a NAV_LAND with no latitude and longitude lands where it is.
+"""Covers missions.route and bridge.mavlink.missionitems: a NAV_LAND (NAV_TAKEOFF) with no latitude and longitude
+lands (takes off) where it is.
 
 QGroundControl writes a value not given as null (a .plan) or nan (a waypoint file), and a legacy MISSION_ITEM
 carries it as NaN; PX4 takes a NAV_LAND whose latitude and longitude are NaN as "descend at current position" (its
@@ -6,7 +7,10 @@ own land-here item is one: ``MissionBlock::set_land_item``) and its parser keeps
 session the plan reader refused it (``coordinates must be numbers, got lat null, lon null``, exit 2) and the mission
 upload answered it MAV_MISSION_INVALID_PARAM5_X. Now a plan file, a waypoint file and an upload (MISSION_ITEM's NaN,
 MISSION_ITEM_INT's INT32_MAX, MAVLink's "optional") fly it as a land over the point the vehicle is at; one of the
-two given alone is still refused, naming both.
+two given alone is still refused, naming both. A NAV_TAKEOFF with neither (MAVSDK's and scripts' takeoffs) was still
+refused so after that (the same message; INVALID_PARAM5_X), though PX4 flies it over the position it holds
+(``FlightTaskAuto``: "No position provided in xy. Lock position"); since the forty-fifth session it takes off where
+it is, by the same code as the land.
 """
 
 from __future__ import annotations
@@ -34,8 +38,8 @@ NORTH = 2.0 / 111_194.9  # deg of latitude: about 2 m
 WAYPOINT = Home(*HOME).paper(HOME[0] + NORTH, HOME[1], HOME[2])[:2]  # the waypoint's x, y (m, paper frame)
 
 
-def _plan(land: tuple[Any, Any]) -> dict[str, Any]:
-    """A takeoff to 1 m here (0, 0), a waypoint 2 m north at 1 m, a landing at ``land`` (lat, lon)."""
+def _plan(land: tuple[Any, Any], takeoff: tuple[Any, Any] = (0, 0)) -> dict[str, Any]:
+    """A takeoff to 1 m at ``takeoff`` (lat, lon; 0, 0: here), a waypoint 2 m north at 1 m, a landing at ``land``."""
     def item(k: int, cmd: int, lat: Any, lon: Any, alt: float) -> dict[str, Any]:
         return {"autoContinue": True, "command": cmd, "doJumpId": k + 1, "frame": 3, "type": "SimpleItem",
                 "params": [0, 0, 0, None, lat, lon, alt]}
@@ -44,7 +48,7 @@ def _plan(land: tuple[Any, Any]) -> dict[str, Any]:
             "rallyPoints": {"version": 2, "points": []},
             "mission": {"version": 2, "firmwareType": 12, "vehicleType": 2, "cruiseSpeed": 15, "hoverSpeed": 5,
                         "plannedHomePosition": list(HOME),
-                        "items": [item(0, 22, 0, 0, 1.0), item(1, 16, HOME[0] + NORTH, HOME[1], 1.0),
+                        "items": [item(0, 22, *takeoff, 1.0), item(1, 16, HOME[0] + NORTH, HOME[1], 1.0),
                                   item(2, 21, *land, 0.0)]}}
 
 
@@ -122,12 +126,9 @@ def test_the_parser_takes_a_land_with_no_position_and_sends_it_back_as_given() -
         assert exc.value.result == result
 
 
-def test_an_uploaded_land_with_no_position_is_flown_where_it_is(tmp_path: Path) -> None:
-    """A pymavlink ground station uploads legacy MISSION_ITEMs (a takeoff here, the waypoint, a land at NaN, NaN) to
-    ``bsst sitl --await-mission`` (lockstep) and starts it: ACCEPTED, flown, landed under the waypoint."""
-    items = [_legacy(0, M.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 1.0),
-             _legacy(1, M.MAV_CMD_NAV_WAYPOINT, HOME[0] + NORTH, HOME[1], 1.0),
-             _legacy(2, M.MAV_CMD_NAV_LAND, math.nan, math.nan, 0.0)]
+def _upload_and_fly(tmp_path: Path, items: list[Any]) -> tuple[dict[str, Any], Path]:
+    """A pymavlink ground station uploads ``items`` to ``bsst sitl --await-mission`` (lockstep), which must accept
+    them, and starts the mission; the run's summary and folder once it is flown."""
     out = tmp_path / "run"
     with instance_slot() as n:
         gcs = gcs_link(n)
@@ -149,8 +150,94 @@ def test_an_uploaded_land_with_no_position_is_flown_where_it_is(tmp_path: Path) 
             sitl.stop()
     summary = json.loads((out / "summary.json").read_text())
     assert rc == clean_exit(summary), "\n".join(sitl.lines[-30:])
+    assert summary["outcome"] == "completed", summary["outcome"]
+    return summary, out
+
+
+def test_an_uploaded_land_with_no_position_is_flown_where_it_is(tmp_path: Path) -> None:
+    """Legacy MISSION_ITEMs (a takeoff here, the waypoint, a land at NaN, NaN): ACCEPTED, flown, landed under the
+    waypoint."""
+    items = [_legacy(0, M.MAV_CMD_NAV_TAKEOFF, 0.0, 0.0, 1.0),
+             _legacy(1, M.MAV_CMD_NAV_WAYPOINT, HOME[0] + NORTH, HOME[1], 1.0),
+             _legacy(2, M.MAV_CMD_NAV_LAND, math.nan, math.nan, 0.0)]
+    _, out = _upload_and_fly(tmp_path, items)
     # the waypoint as a MISSION_ITEM carried it: float32 degrees (about 0.2 m apart)
     at = Home(*HOME).paper(float(np.float32(HOME[0] + NORTH)), float(np.float32(HOME[1])), HOME[2])[:2]
     end = _last_row(out)
     assert math.dist((end["x"], end["y"]), at) < 0.05, (end["x"], end["y"], at)
-    assert end["z"] < 0.01 and summary["outcome"] == "completed", summary["outcome"]
+    assert end["z"] < 0.01, end["z"]
+
+
+def _took_off_over_the_home(run: Path) -> None:
+    """The trace's first row 0.5 m up is over the home (the takeoff climbs straight up where the vehicle is)."""
+    lines = (run / "trace.csv").read_text().splitlines()
+    head = lines[0].split(",")
+    rows = ({k: float(v) for k, v in zip(head, line.split(","), strict=False)} for line in lines[1:])
+    up = next(r for r in rows if r["z"] >= 0.5)
+    assert math.hypot(up["x"], up["y"]) < 0.05, (up["x"], up["y"])
+
+
+@pytest.mark.parametrize("kind", ["plan", "waypoints"])
+def test_a_files_takeoff_with_no_position_takes_off_where_it_is(capsys: Any, tmp_path: Path, kind: str) -> None:
+    """A .plan's takeoff at null, null and a waypoint file's at nan, nan (then the waypoint, a land here): flown,
+    straight up over the home, landed under the waypoint. The old code refused it (``coordinates must be numbers``,
+    exit 2)."""
+    if kind == "plan":
+        path = tmp_path / "up.plan"
+        path.write_text(json.dumps(_plan((None, None), takeoff=(None, None)), indent=4))
+    else:
+        path = tmp_path / "up.waypoints"
+        path.write_text("QGC WPL 110\n"
+                        f"0\t1\t0\t16\t0\t0\t0\t0\t{HOME[0]}\t{HOME[1]}\t{HOME[2]}\t1\n"
+                        "1\t0\t3\t22\t0\t0\t0\tnan\tnan\tnan\t1.0\t1\n"
+                        f"2\t0\t3\t16\t0\t0\t0\tnan\t{HOME[0] + NORTH!r}\t{HOME[1]}\t1.0\t1\n"
+                        "3\t0\t3\t21\t0\t0\t0\tnan\tnan\tnan\t0\t1\n")
+    out = tmp_path / "run"
+    assert main(["sim", str(path), "--no-plots", "--out", str(out)]) == 0, capsys.readouterr().err
+    _took_off_over_the_home(out)
+    _landed_at_the_waypoint(out)
+
+
+def test_a_takeoff_with_one_of_the_two_given_is_refused_naming_both(capsys: Any, tmp_path: Path) -> None:
+    path = tmp_path / "half.plan"
+    path.write_text(json.dumps(_plan((None, None), takeoff=(HOME[0], None))))
+    assert main(["sim", str(path), "--no-plots", "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"bsst: {path}: mission.items[0] (NAV_TAKEOFF (22)): latitude {HOME[0]}, longitude null: give "
+                   "both (the takeoff point) or neither (both null: take off where it is)"], err
+
+
+def test_the_parser_takes_a_takeoff_with_no_position_and_sends_it_back_as_given() -> None:
+    """MISSION_ITEM NaN, NaN and MISSION_ITEM_INT INT32_MAX, INT32_MAX on a NAV_TAKEOFF: held as NOT_GIVEN,
+    downloaded as each form writes "not given", given to the route as NaN, NaN; one of the two alone refused."""
+    for msg, int_mode in ((_legacy(0, M.MAV_CMD_NAV_TAKEOFF, math.nan, math.nan, 1.0), False),
+                          (_int(0, M.MAV_CMD_NAV_TAKEOFF, INT32_MAX, INT32_MAX, 1.0), True)):
+        it = parse_item(msg, int_mode)
+        assert (it.x, it.y) == NOT_GIVEN
+        back = item_message(it, (255, 190), False, False)
+        assert math.isnan(back.x) and math.isnan(back.y)
+        assert (item_message(it, (255, 190), False, True).x, item_message(it, (255, 190), False, True).y) == NOT_GIVEN
+        plan = plan_of((it,), HOME, "held")
+        assert math.isnan(plan.items[0].lat) and math.isnan(plan.items[0].lon)
+    for msg, int_mode, result in (
+            (_legacy(0, M.MAV_CMD_NAV_TAKEOFF, math.nan, HOME[1], 1.0), False, M.MAV_MISSION_INVALID_PARAM5_X),
+            (_int(0, M.MAV_CMD_NAV_TAKEOFF, int(HOME[0] * 1e7), INT32_MAX, 1.0), True,
+             M.MAV_MISSION_INVALID_PARAM6_Y)):
+        with pytest.raises(ItemRefused) as exc:
+            parse_item(msg, int_mode)
+        assert exc.value.result == result
+
+
+def test_an_uploaded_takeoff_with_no_position_is_flown_where_it_is(tmp_path: Path) -> None:
+    """MISSION_ITEM_INTs as MAVSDK sends them (a takeoff at INT32_MAX, INT32_MAX, MAVLink's "not given"; the
+    waypoint; a land likewise): ACCEPTED (INVALID_PARAM5_X on the old code), flown straight up over the home, landed
+    under the waypoint."""
+    items = [_int(0, M.MAV_CMD_NAV_TAKEOFF, INT32_MAX, INT32_MAX, 1.0),
+             _int(1, M.MAV_CMD_NAV_WAYPOINT, round((HOME[0] + NORTH) * 1e7), round(HOME[1] * 1e7), 1.0),
+             _int(2, M.MAV_CMD_NAV_LAND, INT32_MAX, INT32_MAX, 0.0)]
+    _, out = _upload_and_fly(tmp_path, items)
+    _took_off_over_the_home(out)
+    at = Home(*HOME).paper(round((HOME[0] + NORTH) * 1e7) / 1e7, round(HOME[1] * 1e7) / 1e7, HOME[2])[:2]
+    end = _last_row(out)
+    assert math.dist((end["x"], end["y"]), at) < 0.05, (end["x"], end["y"], at)
+    assert end["z"] < 0.01, end["z"]

@@ -22,10 +22,11 @@ What PX4 refuses, and with which result (its parser, then its mission-type check
 
 Ours on top (PX4 leaves them to its feasibility checks at mission start): in a global frame a latitude
 not finite or beyond +-90 deg is ``MAV_MISSION_INVALID_PARAM5_X``, a longitude beyond +-180 deg
-``MAV_MISSION_INVALID_PARAM6_Y``, an altitude not finite ``MAV_MISSION_INVALID_PARAM7``; but a NAV_LAND's latitude
-and longitude both NaN (MISSION_ITEM) or both INT32_MAX (MISSION_ITEM_INT) are taken as not given, land where it is
-(PX4's parser keeps the NaN, its own land-here item is one), held as :data:`NOT_GIVEN` and sent back as given. A NaN
-param1..4 is MAVLink's "use the default" (MAVSDK sends yaw NaN) and is kept.
+``MAV_MISSION_INVALID_PARAM6_Y``, an altitude not finite ``MAV_MISSION_INVALID_PARAM7``; but a NAV_LAND's or
+NAV_TAKEOFF's latitude and longitude both NaN (MISSION_ITEM) or both INT32_MAX (MISSION_ITEM_INT) are taken as not
+given, land or take off where it is (PX4's parser keeps the NaN, its own land-here item is one, and its flight task
+holds the position a setpoint without latitude and longitude finds), held as :data:`NOT_GIVEN` and sent back as
+given. A NaN param1..4 is MAVLink's "use the default" (MAVSDK sends yaw NaN) and is kept.
 """
 
 from __future__ import annotations
@@ -75,7 +76,8 @@ ROI_MODES_GLOBAL = frozenset({_C.MAV_ROI_LOCATION, _C.MAV_ROI_NONE})
 ROI_MODES_MISSION = frozenset({_C.MAV_ROI_NONE, _C.MAV_ROI_WPNEXT, _C.MAV_ROI_WPINDEX})
 DEG_E7 = 1e7
 INT32_MAX = 2**31 - 1  # a MISSION_ITEM_INT's x or y not given (MAVLink: "optional"), a MISSION_ITEM's NaN
-NOT_GIVEN = (INT32_MAX, INT32_MAX)  # a MissionItem's x, y of a NAV_LAND with no position: land where it is
+NOT_GIVEN = (INT32_MAX, INT32_MAX)  # a MissionItem's x, y of a NAV_LAND or NAV_TAKEOFF with no position: here
+HERE_COMMANDS = frozenset({_C.MAV_CMD_NAV_LAND, _C.MAV_CMD_NAV_TAKEOFF})  # those that may have no position: here
 
 
 def _roi_mode(p1: float) -> int:
@@ -142,11 +144,13 @@ def item_position(m: Any, int_mode: bool) -> tuple[int, int]:
     return x, y
 
 
-def _lands_here(m: Any, int_mode: bool) -> bool:
-    """Whether ``m`` is a NAV_LAND with no latitude and longitude: both NaN (a MISSION_ITEM's, PX4's own land-here
-    item, ``MissionBlock::set_land_item``: "descend at current position") or both INT32_MAX (a MISSION_ITEM_INT's:
-    MAVLink's "optional" for an integer). One of the two alone is refused as any other bad position."""
-    if m.command != mavlink.MAV_CMD_NAV_LAND:
+def _here(m: Any, int_mode: bool) -> bool:
+    """Whether ``m`` is a NAV_LAND or NAV_TAKEOFF with no latitude and longitude: both NaN (a MISSION_ITEM's, PX4's
+    own land-here item, ``MissionBlock::set_land_item``: "descend at current position"; MAVSDK's and scripts'
+    takeoffs, which PX4's ``FlightTaskAuto`` flies over the position it holds: "No position provided in xy. Lock
+    position") or both INT32_MAX (a MISSION_ITEM_INT's: MAVLink's "optional" for an integer). One of the two alone
+    is refused as any other bad position."""
+    if m.command not in HERE_COMMANDS:
         return False
     if int_mode:
         return int(m.x) == int(m.y) == INT32_MAX
@@ -162,7 +166,7 @@ def parse_item(m: Any, int_mode: bool) -> MissionItem:
             raise ItemRefused(mavlink.MAV_MISSION_UNSUPPORTED, f"command {command} unsupported in frame {frame}")
         if command in _ROI and _roi_mode(m.param1) not in ROI_MODES_GLOBAL:
             raise ItemRefused(mavlink.MAV_MISSION_INVALID_PARAM1, f"ROI mode {m.param1} unsupported here")
-        x, y = NOT_GIVEN if _lands_here(m, int_mode) else item_position(m, int_mode)
+        x, y = NOT_GIVEN if _here(m, int_mode) else item_position(m, int_mode)
         if not math.isfinite(m.z):
             raise ItemRefused(mavlink.MAV_MISSION_INVALID_PARAM7, f"altitude {m.z} is not a number")
     elif frame == mavlink.MAV_FRAME_MISSION:
@@ -198,10 +202,10 @@ def item_message(item: MissionItem, target: tuple[int, int], current: bool, int_
 
 def _degrees(item: MissionItem) -> tuple[float, float]:
     """x, y as a MISSION_ITEM and a plan carry them: degrees in a global frame (NaN, NaN for a land-here's
-    :data:`NOT_GIVEN`), param5 and param6 as they are in MAV_FRAME_MISSION."""
+    or take-off-here's :data:`NOT_GIVEN`), param5 and param6 as they are in MAV_FRAME_MISSION."""
     if not item.global_frame:
         return float(item.x), float(item.y)
-    if (item.x, item.y) == NOT_GIVEN and item.command == mavlink.MAV_CMD_NAV_LAND:
+    if (item.x, item.y) == NOT_GIVEN and item.command in HERE_COMMANDS:
         return math.nan, math.nan
     return item.x / DEG_E7, item.y / DEG_E7
 
