@@ -286,6 +286,12 @@ _DEVICE_NAMES = {"gps": "the GPS", "mag": "the compass", "battery": "the battery
 _SWITCHES = ("gps", "mag", "battery")
 
 
+def at_first_step(timeline: Sequence[TimedEvent], rate_hz: float, kind: str) -> TimedEvent | None:
+    """The first event of ``kind`` that acts at the flight's first control step (``t_s = 0``, step 0 at
+    ``rate_hz``): what it sets (a steady wind, a link) is flown from the start, in place of the flight's own; None."""
+    return next((e for e in timeline if e.kind == kind and e.step(rate_hz) == 0), None)
+
+
 def device_set(e: TimedEvent) -> tuple[tuple[Any, ...], Any] | None:
     """(the device ``e`` sets, the state it sets it to), or None for an event that adds to what is there (a GPS jump,
     a gyro bias) or changes the air or the link."""

@@ -92,6 +92,9 @@ class WindConfig:
     gusts: tuple[Gust, ...] = ()
     scaling: str = "exact"  # SCALING: exact (TurbulenceRecord) or none (the free-running filters)
     record_s: float = 60.0  # the record's length (s) under exact scaling: the mission's duration (wind_from_table)
+    # the steady wind a wind event at the flight's first control step sets, flown from the start in place of
+    # speed_mps, from_deg (which stay the turbulence's pass speed and axes): (m/s, deg, where the event was given)
+    start: tuple[float, float, str] | None = None
 
     def at_altitude(self, altitude_m: float) -> WindConfig:
         return replace(self, altitude_m=altitude_m)
@@ -393,6 +396,8 @@ class Wind:
         out: dict = {**c.as_table(), "samples": self._n, "mean_mps": {"along": mean[0], "across": mean[1],
                                                                       "up": mean[2]},
                      "mean_speed_mps": math.hypot(mean[0], mean[1]), "peak_mps": self.peak_mps}
+        if c.start is not None:  # the steady wind flown from the start: a t = 0 wind event's
+            out["steady_at_start"] = {"speed_mps": c.start[0], "from_deg": c.start[1], "by": c.start[2]}
         rec = self.turbulence
         if rec is not None:
             tu = rec.free if isinstance(rec, TurbulenceRecord) else rec  # the filters: what was asked of them

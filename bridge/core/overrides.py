@@ -30,7 +30,7 @@ from missions import Mission
 from missions.mission import law_spec_from
 from params import ConfigError
 from params.text import shown_name
-from plant.events import AT_KEY, TimedEvent, event_given, event_table_from_flag, table_where
+from plant.events import AT_KEY, TimedEvent, at_first_step, event_given, event_table_from_flag, table_where
 from plant.wind import SCALING, TURBULENCE
 
 
@@ -296,11 +296,7 @@ def replaced_laid_problem(over: Overrides, source: str, timeline: Sequence[Timed
     event later than that leaves it flown until then (docs/weather.md). A steady wind is not refused where the flight
     flies turbulence (``turbulent``): its speed and direction set the turbulence's pass speed and axes, which the
     event (the steady wind alone) leaves as they are. None."""
-    first = {}
-    for e in timeline:
-        if e.kind in ("wind", "link") and e.step(rate_hz) == 0:
-            first.setdefault(e.kind, e)
-    wind = first.get("wind")
+    wind = at_first_step(timeline, rate_hz, "wind")
     if wind is not None and not turbulent and over.wind and {"speed_mps", "from_deg"} & set(over.wind):
         w = over.wind
         laid = f"{w.get('speed_mps', 0.0):g}" + (f":{w['from_deg']:g}" if "from_deg" in w else "")
@@ -308,7 +304,7 @@ def replaced_laid_problem(over: Overrides, source: str, timeline: Sequence[Timed
                 "at the flight's first control step, and no turbulence is flown (whose pass speed and axes it would "
                 "set), so the flight never flies the flag's; drop --wind, or give the wind in that event (an event at "
                 "a later time leaves --wind blowing until it)")
-    link = first.get("link")
+    link = at_first_step(timeline, rate_hz, "link")
     named = _replaced_link_flags(over.link, over.link_flags) if link is not None and over.link else []
     if named:
         flags = ", ".join(named)

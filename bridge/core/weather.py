@@ -15,6 +15,8 @@ flies through, and what a timeline's event may do to this vehicle, is here.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from bridge.link.model import LinkConfig, link_from_table, unmet_key
 from missions import Mission
 from params import ConfigError, Table
@@ -23,6 +25,7 @@ from plant.events import (
     SENSOR_EVENT_KINDS,
     EventError,
     TimedEvent,
+    at_first_step,
     check_state_changes,
     table_where,
     timeline_from_tables,
@@ -98,6 +101,9 @@ def weather_of(m: Mission, prof: Profile, sensors: SensorConfig, estimator: str,
         n = 100
         heights = [m.trajectory.sample(m.duration_s * k / n)[2][0] for k in range(n + 1)]
         wind = wind.at_altitude(max(sum(heights) / len(heights), 0.0))
+    first = at_first_step(timeline, m.rate_hz, "wind")  # its steady wind is the one flown from the start: said
+    if first is not None:
+        wind = replace(wind, start=(first.get("speed_mps"), first.get("from_deg"), table_where(src, first)))
     return wind, timeline
 
 

@@ -58,13 +58,19 @@ def not_reached(outcome: str, timeline: Sequence[Any], trace_t: np.ndarray, wind
 def air_text(wind: Mapping[str, Any]) -> str:
     """The summary's line naming the air flown (``summary.json``'s ``wind`` block: the ``[wind]`` table with
     ``--wind``/``--turbulence`` laid over it): the steady wind at the start, the turbulence and its scaling, how many
-    ``[wind]`` gusts; the wind and gust events, ``[wind]``'s too, are the summary's event lines."""
+    ``[wind]`` gusts; the wind and gust events, ``[wind]``'s too, are the summary's event lines. A wind event at the
+    flight's first control step (``steady_at_start``) sets the steady wind flown from the start: that one is named,
+    with the event and the ``[wind]`` steady wind it replaced (still the turbulence's pass speed and axes)."""
     level = wind.get("turbulence", "none")
     turbulence = f"turbulence {level}" + (f" (scaling {wind.get('turbulence_scaling')})" if level != "none" else "")
     n = len(wind.get("gusts") or ())
     gusts = f", {n} [wind] gust{'' if n == 1 else 's'}" if n else ""
-    return (f"air: wind {wind.get('speed_mps', 0.0):g} m/s from {wind.get('from_deg', 0.0):g} deg, {turbulence}"
-            f"{gusts}; drag on the airspeed")
+    given = f"{wind.get('speed_mps', 0.0):g} m/s from {wind.get('from_deg', 0.0):g} deg"
+    start = wind.get("steady_at_start")
+    steady = given if start is None else (
+        f"{start['speed_mps']:g} m/s from {start['from_deg']:g} deg from t = 0 ({start['by']}; in place of [wind]'s "
+        f"{given}" + (", the turbulence's pass speed and axes)" if level != "none" else ")"))
+    return f"air: wind {steady}, {turbulence}{gusts}; drag on the airspeed"
 
 
 def plant_summary(blocks: Mapping[str, Any], trace: Mapping[str, np.ndarray],
