@@ -141,6 +141,7 @@ def _point(z: Table, key: str, i: int, p: Any) -> tuple[float, float]:
 # what QGroundControl's plan loader does with a plan's object given without a version (src/MissionManager:
 # GeoFenceController::load ignores it, "old version 1 or prior data", and loads the plan with no fence;
 # RallyPointController::load requires the key and refuses the plan), and what to do, for the refusal
+CONTROLLER = {"geoFence": "GeoFenceController", "rallyPoints": "RallyPointController"}  # whose load reads each
 NO_VERSION = {
     "geoFence": ("QGroundControl's plan loader (GeoFenceController::load) takes a geoFence without a version for old "
                  "data and ignores it: the plan it loads has no fence, where this one draws zones; give "
@@ -150,9 +151,12 @@ NO_VERSION = {
 }
 
 
-def plan_object_keys(raw: Mapping[str, Any], source: str, name: str, keys: tuple[str, ...]) -> None:
+def plan_object_keys(raw: Mapping[str, Any], source: str, name: str, keys: tuple[str, ...],
+                     required: tuple[str, ...] = ()) -> None:
     """Refuse a plan's ``name`` object (``geoFence``, ``rallyPoints``) of a ``version`` other than QGroundControl's 2,
-    or with a key not in ``keys``: either was read as no zones or no points, and flown without them. One without a
+    with a key not in ``keys``, or, of version 2, without one of ``required``: each was read as no zones or no
+    points, and flown without them, where QGroundControl's loader refuses the plan (``JsonHelper::validateKeys``: a
+    version 2 ``geoFence`` requires ``circles`` and ``polygons``, ``rallyPoints`` ``points``). One without a
     ``version`` is QGroundControl's to say (its plan loader, :data:`NO_VERSION`): a ``geoFence`` it ignores, so one
     holding zones is refused (with none, it is read as QGroundControl reads it: no fence); ``rallyPoints`` it refuses.
     """
@@ -165,6 +169,11 @@ def plan_object_keys(raw: Mapping[str, Any], source: str, name: str, keys: tuple
     unknown = sorted(str(k) for k in raw if k not in keys)
     if unknown:
         raise ConfigError(f"{source}: {name}.{unknown[0]}: unknown key; {name} has {', '.join(keys)}"[:300])
+    missing = [k for k in required if k not in raw] if "version" in raw else []
+    if missing:
+        raise ConfigError(f"{source}: {name}.{missing[0]}: missing: QGroundControl's plan loader "
+                          f"({CONTROLLER[name]}::load) requires {' and '.join(required)} in a version 2 {name} and "
+                          f"refuses the plan; give \"{missing[0]}\": [] for none")
 
 
 def geofence_from_plan(raw: Any, home: Home, source: str) -> Geofence | None:
@@ -174,7 +183,8 @@ def geofence_from_plan(raw: Any, home: Home, source: str) -> Geofence | None:
         return None
     if not isinstance(raw, Mapping):
         raise ConfigError(f"{source}: geoFence: expected an object")
-    plan_object_keys(raw, source, "geoFence", ("version", "polygons", "circles", "breachReturn"))
+    plan_object_keys(raw, source, "geoFence", ("version", "polygons", "circles", "breachReturn"),
+                     ("circles", "polygons"))
     zones: list[Zone] = []
     for key in ("polygons", "circles"):
         items = raw.get(key, [])

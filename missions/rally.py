@@ -49,7 +49,7 @@ def rally_from_plan(raw: Any, home: Home, source: str, radius_m: float) -> tuple
         return ()
     if not isinstance(raw, Mapping) or not isinstance(raw.get("points", []), list):
         raise ConfigError(f"{source}: rallyPoints: expected an object with points [[lat, lon, alt], ...]")
-    plan_object_keys(raw, source, "rallyPoints", ("version", "points"))
+    plan_object_keys(raw, source, "rallyPoints", ("version", "points"), ("points",))
     local = []
     for i, p in enumerate(raw.get("points", [])):
         lat, lon, alt = (finite_float(v) for v in p) if isinstance(p, list) and len(p) == 3 else (None,) * 3

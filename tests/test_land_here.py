@@ -44,8 +44,8 @@ def _plan(land: tuple[Any, Any], takeoff: tuple[Any, Any] = (0, 0)) -> dict[str,
         return {"autoContinue": True, "command": cmd, "doJumpId": k + 1, "frame": 3, "type": "SimpleItem",
                 "params": [0, 0, 0, None, lat, lon, alt]}
 
-    return {"fileType": "Plan", "version": 1, "groundStation": "QGroundControl", "geoFence": {"version": 2},
-            "rallyPoints": {"version": 2, "points": []},
+    return {"fileType": "Plan", "version": 1, "groundStation": "QGroundControl",
+            "geoFence": {"version": 2, "circles": [], "polygons": []}, "rallyPoints": {"version": 2, "points": []},
             "mission": {"version": 2, "firmwareType": 12, "vehicleType": 2, "cruiseSpeed": 15, "hoverSpeed": 5,
                         "plannedHomePosition": list(HOME),
                         "items": [item(0, 22, *takeoff, 1.0), item(1, 16, HOME[0] + NORTH, HOME[1], 1.0),

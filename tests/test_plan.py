@@ -162,6 +162,19 @@ def test_every_command_a_refusal_names_is_named_as_mavlinks_common_xml_names_it(
     (lambda d: d.update(rallyPoints={"points": [[47.3978, 8.5456, 490]]}),
      ["rallyPoints.version: missing: QGroundControl's plan loader (RallyPointController::load) requires it and "
       "refuses the plan"]),
+    # a version 2 geoFence without circles or polygons, rallyPoints without points: QGroundControl's loader refuses
+    # the plan (JsonHelper::validateKeys); read as none until the forty-fifth session
+    (lambda d: d.update(geoFence={"version": 2, "polygons": []}),
+     ["geoFence.circles: missing: QGroundControl's plan loader (GeoFenceController::load) requires circles and "
+      'polygons in a version 2 geoFence and refuses the plan; give "circles": [] for none']),
+    (lambda d: d.update(geoFence={"version": 2, "circles": [{"circle": {"center": [47.397742, 8.545594],
+                                                                        "radius": 50}, "inclusion": True}]}),
+     ["geoFence.polygons: missing: QGroundControl's plan loader (GeoFenceController::load) requires circles and "
+      'polygons in a version 2 geoFence']),
+    (lambda d: d.update(geoFence={"version": 2}), ["geoFence.circles: missing: "]),
+    (lambda d: d.update(rallyPoints={"version": 2}),
+     ["rallyPoints.points: missing: QGroundControl's plan loader (RallyPointController::load) requires points in a "
+      'version 2 rallyPoints and refuses the plan; give "points": [] for none']),
     # a hold time is flown: null (NaN) is refused as -5 is; a null yaw (param4) is QGroundControl's "not given"
     (lambda d: d["mission"]["items"][2].update(command=19, params=[None, 0, 0, None, 47.3979219, 8.5458597, 10]),
      ["mission.items[2]", "NAV_LOITER_TIME (19)", "hold time (param1) null", "[0, 3600]"]),
