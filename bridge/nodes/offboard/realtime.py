@@ -147,17 +147,21 @@ class RealtimeFlying(OffboardLink):
     def watch_stalls(self) -> None:
         """From now on (the ARM sent) until the mission's first tick, the link's waits (:meth:`_serve`) note the
         machine's stalls: wake-ups more than STALL_S past the time they slept to (the link's next housekeeping, at
-        most HOUSEKEEPING_S after the last wake-up), at wall time (s of ``time.monotonic``)."""
+        most HOUSEKEEPING_S after the last wake-up: a longer wait, the ARM's 0.1 s, ends there and its caller waits
+        on), at wall time (s of ``time.monotonic``)."""
         self._held, self._woke, self._late = Stalls(), time.monotonic(), 0.0
 
     def _serve(self, deadline: float) -> None:
         held = self._held
         if held is None:
             return super()._serve(deadline)
-        for _, m, _addr in wait((self.ep,), deadline):
+        # at most HOUSEKEEPING_S past the last wake (a stall before the sleep began: from it), whatever the caller's
+        # deadline: it loops to its own. (An ARM's 0.1 s wait judged against 50 ms was a 50 ms stall each, on an idle
+        # machine: forty-fifth session's review)
+        slept_to = min(deadline, self._woke + HOUSEKEEPING_S)
+        for _, m, _addr in wait((self.ep,), slept_to):
             self._on(m)
         now = time.monotonic()
-        slept_to = min(deadline, self._woke + HOUSEKEEPING_S)  # (a stall before the sleep began: from the last wake)
         self._late, self._woke = now - slept_to, now
         held.note(slept_to, self._late)
         if now >= self._next_house:
