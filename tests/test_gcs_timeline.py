@@ -17,6 +17,8 @@ from __future__ import annotations
 import math
 import signal
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +41,23 @@ RATE_HZ = 50.0  # a coarse control period (20 ms) keeps the real-time vehicle li
 WINDY = (f'name = "gcswind"\nduration_s = 10.0\nrate_hz = {RATE_HZ}\n[trajectory]\nkind = "sine"\namplitude = 0.0\n'
          '[[events]]\nt_s = 1.0\nkind = "wind"\nspeed_mps = 2.0\n'
          '[[events]]\nt_s = 6.0\nkind = "wind"\nspeed_mps = 4.0\nfrom_deg = 90.0\n')
+
+
+@contextmanager
+def _flown_by_a_gcs(mission: Path, *flags: str) -> Iterator[tuple[int, Proc, Any]]:
+    """A real ``bsst vehicle MISSION --realtime FLAGS`` on a free instance and a pymavlink ground station on its
+    ground-station port, the vehicle ready and heard (its HEARTBEAT): the instance, the vehicle, the ground station.
+    The ground station closed and the vehicle stopped (if it still runs) at the end, however the test ended."""
+    with instance_slot() as n:
+        gcs = _gcs(n)
+        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), *flags, cwd=ROOT)
+        try:
+            v.wait_report(Ready, timeout=60)
+            assert gcs.wait_heartbeat(timeout=20) is not None
+            yield n, v, gcs
+        finally:
+            gcs.close()
+            v.stop()
 
 
 def _events(v: Proc) -> list[Event]:
@@ -66,22 +85,14 @@ def test_a_ground_stations_takeoff_flies_the_timeline_from_its_arm_and_says_what
     mission = tmp_path / "gcswind.toml"
     mission.write_text(WINDY)
     period = 1.0 / RATE_HZ
-    with instance_slot() as n:
-        gcs = _gcs(n)
-        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), cwd=ROOT)
-        try:
-            v.wait_report(Ready, timeout=60)
-            assert gcs.wait_heartbeat(timeout=20) is not None
-            # the vehicle's plant has run 1.5 s on the ground (its time_boot_ms: simulation time) when the flight begins
-            ran = gcs.recv_match(type="ATTITUDE", blocking=True, timeout=30, condition="ATTITUDE.time_boot_ms >= 1500")
-            assert ran is not None
-            _take_off(gcs)
-            wind = v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
-            v.p.send_signal(signal.SIGINT)
-            status = v.p.wait(timeout=30)
-        finally:
-            gcs.close()
-            v.stop()
+    with _flown_by_a_gcs(mission) as (_, v, gcs):
+        # the vehicle's plant has run 1.5 s on the ground (its time_boot_ms: simulation time) when the flight begins
+        ran = gcs.recv_match(type="ATTITUDE", blocking=True, timeout=30, condition="ATTITUDE.time_boot_ms >= 1500")
+        assert ran is not None
+        _take_off(gcs)
+        wind = v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
+        v.p.send_signal(signal.SIGINT)
+        status = v.p.wait(timeout=30)
     events = _events(v)
     said = [ln for ln in v.lines if ln.startswith("bsst vehicle")]
     armed = next(e for e in events if e.kind == "armed")
@@ -157,25 +168,17 @@ def test_an_arm_on_the_ground_flies_nothing_a_controllers_flight_after_it_flies_
     vehicle's start), before the controller even armed, and nothing said so."""
     mission = tmp_path / "gcsshort.toml"
     mission.write_text(SHORT)
-    with instance_slot() as n:
-        gcs = _gcs(n)
-        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), cwd=ROOT)
-        ctl = None
+    with _flown_by_a_gcs(mission) as (n, v, gcs):
+        _arm_in_hold_and_disarm(v, gcs)
+        ctl = Proc.bsst("controller", str(mission), "--realtime", "--instance", str(n), cwd=ROOT)
         try:
-            v.wait_report(Ready, timeout=60)
-            assert gcs.wait_heartbeat(timeout=20) is not None
-            _arm_in_hold_and_disarm(v, gcs)
-            ctl = Proc.bsst("controller", str(mission), "--realtime", "--instance", str(n), cwd=ROOT)
             status = ctl.p.wait(timeout=90)
             first = v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
             v.wait_report(Event, lambda e: e.kind == "wind" and e.t > first.t, timeout=30)
             v.p.send_signal(signal.SIGINT)
             v_status = v.p.wait(timeout=30)
         finally:
-            gcs.close()
-            if ctl is not None:
-                ctl.stop()
-            v.stop()
+            ctl.stop()
     events = _events(v)
     said = [ln for ln in v.lines if ln.startswith("bsst vehicle")]
     armed = [e for e in events if e.kind == "armed"]
@@ -199,21 +202,13 @@ def test_an_arm_in_hold_disarmed_then_a_takeoff_flies_the_timeline_from_the_take
     mission = tmp_path / "gcswind.toml"
     mission.write_text(WINDY)
     period = 1.0 / RATE_HZ
-    with instance_slot() as n:
-        gcs = _gcs(n)
-        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), cwd=ROOT)
-        try:
-            v.wait_report(Ready, timeout=60)
-            assert gcs.wait_heartbeat(timeout=20) is not None
-            held = _arm_in_hold_and_disarm(v, gcs)
-            _take_off(gcs)
-            v.wait_report(Event, lambda e: e.kind == "armed" and e.t > held.t, timeout=30)
-            wind = v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
-            v.p.send_signal(signal.SIGINT)
-            status = v.p.wait(timeout=30)
-        finally:
-            gcs.close()
-            v.stop()
+    with _flown_by_a_gcs(mission) as (_, v, gcs):
+        held = _arm_in_hold_and_disarm(v, gcs)
+        _take_off(gcs)
+        v.wait_report(Event, lambda e: e.kind == "armed" and e.t > held.t, timeout=30)
+        wind = v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
+        v.p.send_signal(signal.SIGINT)
+        status = v.p.wait(timeout=30)
     events = _events(v)
     said = [ln for ln in v.lines if ln.startswith("bsst vehicle")]
     armed = [e for e in events if e.kind == "armed"]
@@ -236,22 +231,13 @@ def test_a_flight_its_plant_ended_says_its_timeline_was_cut_there_not_at_the_sto
     t=15.000 s: …: the vehicle stopped at t=2.040 s of its flight's time``, the process stopped seconds later)."""
     mission = tmp_path / "gcswind.toml"
     mission.write_text(WINDY)
-    with instance_slot() as n:
-        gcs = _gcs(n)
-        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), "--profile", "x500",
-                      "--param", "SYS_FAILURE_EN=1", cwd=ROOT)
-        try:
-            v.wait_report(Ready, timeout=60)
-            assert gcs.wait_heartbeat(timeout=20) is not None
-            _take_off(gcs)
-            v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
-            assert _inject(gcs, M.FAILURE_UNIT_SYSTEM_MOTOR, M.FAILURE_TYPE_OFF, 0) == M.MAV_RESULT_ACCEPTED
-            end = v.wait_report(Event, lambda e: e.kind in ("crashed", "diverged"), timeout=30)
-            v.p.send_signal(signal.SIGINT)
-            status = v.p.wait(timeout=30)
-        finally:
-            gcs.close()
-            v.stop()
+    with _flown_by_a_gcs(mission, "--profile", "x500", "--param", "SYS_FAILURE_EN=1") as (_, v, gcs):
+        _take_off(gcs)
+        v.wait_report(Event, lambda e: e.kind == "wind", timeout=30)
+        assert _inject(gcs, M.FAILURE_UNIT_SYSTEM_MOTOR, M.FAILURE_TYPE_OFF, 0) == M.MAV_RESULT_ACCEPTED
+        end = v.wait_report(Event, lambda e: e.kind in ("crashed", "diverged"), timeout=30)
+        v.p.send_signal(signal.SIGINT)
+        status = v.p.wait(timeout=30)
     armed = next(e for e in _events(v) if e.kind == "armed")
     said = [ln for ln in v.lines if ln.startswith("bsst vehicle")]
     assert status == 1 and said[0].startswith(f"bsst vehicle: {end.kind} at t={end.t:.3f} s"), said
@@ -273,37 +259,28 @@ def test_an_ekf_vehicle_armed_in_hold_on_the_ground_stays_there_until_com_disarm
     mission = tmp_path / "gcsekf.toml"
     mission.write_text(f'name = "gcsekf"\nduration_s = 10.0\nrate_hz = {RATE_HZ}\n[trajectory]\nkind = "sine"\n'
                        'amplitude = 0.0\n[sensors]\nset = "gnss"\n[estimator]\nkind = "ekf"\n')
-    with instance_slot() as n:
-        gcs = _gcs(n)
-        v = Proc.bsst("vehicle", str(mission), "--realtime", "--instance", str(n), "--param", "COM_DISARM_PRFLT=2",
-                      cwd=ROOT)
-        try:
-            v.wait_report(Ready, timeout=60)
-            assert gcs.wait_heartbeat(timeout=20) is not None
-            tgt = (gcs.target_system, gcs.target_component)
-            for command, params in ((M.MAV_CMD_DO_SET_MODE, HOLD), (M.MAV_CMD_COMPONENT_ARM_DISARM, (1,))):
-                gcs.mav.command_long_send(*tgt, command, 0, *params, *(0,) * (7 - len(params)))
-                assert _ack(gcs, command).result == M.MAV_RESULT_ACCEPTED
-            armed = v.wait_report(Event, lambda e: e.kind == "armed", timeout=30)
-            landed, was_armed = [], False
-            deadline = time.monotonic() + 30.0  # the disarm is due 2 s after the arm
-            while time.monotonic() < deadline:
-                m = gcs.recv_match(type=["HEARTBEAT", "EXTENDED_SYS_STATE"], blocking=True, timeout=5)
-                assert m is not None, "no telemetry"
-                if m.get_type() == "HEARTBEAT":
-                    now_armed = bool(m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
-                    if was_armed and not now_armed:
-                        break
-                    was_armed = now_armed
-                elif was_armed:
-                    landed.append(m.landed_state)
-                    assert m.landed_state == M.MAV_LANDED_STATE_ON_GROUND, landed
-            else:
-                pytest.fail(f"still armed 30 s after the arm in HOLD: {len(landed)} EXTENDED_SYS_STATE seen armed")
-            disarmed = v.wait_report(Event, lambda e: e.kind == "disarmed", timeout=30)
-        finally:
-            gcs.close()
-            v.stop()
+    with _flown_by_a_gcs(mission, "--param", "COM_DISARM_PRFLT=2") as (_, v, gcs):
+        tgt = (gcs.target_system, gcs.target_component)
+        for command, params in ((M.MAV_CMD_DO_SET_MODE, HOLD), (M.MAV_CMD_COMPONENT_ARM_DISARM, (1,))):
+            gcs.mav.command_long_send(*tgt, command, 0, *params, *(0,) * (7 - len(params)))
+            assert _ack(gcs, command).result == M.MAV_RESULT_ACCEPTED
+        armed = v.wait_report(Event, lambda e: e.kind == "armed", timeout=30)
+        landed, was_armed = [], False
+        deadline = time.monotonic() + 30.0  # the disarm is due 2 s after the arm
+        while time.monotonic() < deadline:
+            m = gcs.recv_match(type=["HEARTBEAT", "EXTENDED_SYS_STATE"], blocking=True, timeout=5)
+            assert m is not None, "no telemetry"
+            if m.get_type() == "HEARTBEAT":
+                now_armed = bool(m.base_mode & M.MAV_MODE_FLAG_SAFETY_ARMED)
+                if was_armed and not now_armed:
+                    break
+                was_armed = now_armed
+            elif was_armed:
+                landed.append(m.landed_state)
+                assert m.landed_state == M.MAV_LANDED_STATE_ON_GROUND, landed
+        else:
+            pytest.fail(f"still armed 30 s after the arm in HOLD: {len(landed)} EXTENDED_SYS_STATE seen armed")
+        disarmed = v.wait_report(Event, lambda e: e.kind == "disarmed", timeout=30)
     assert armed.text == "armed, HOLD", armed
     assert disarmed.text == "disarmed: no takeoff within COM_DISARM_PRFLT = 2 s of arming", disarmed
     assert 2.0 - 0.05 <= disarmed.t - armed.t < 2.0 + 2.0, (armed.t, disarmed.t)  # (its time runs on the wall's)
