@@ -199,6 +199,10 @@ def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[St
             continue
         if cmd in (NAV_LAND, NAV_TAKEOFF) and item.lat == 0.0 and item.lon == 0.0 or _here(plan, item):
             x, y = here.x, here.y  # no position given: where it is
+            if cmd == NAV_TAKEOFF and not math.isfinite(item.alt):  # (the home's latitude, longitude stand in below)
+                raise plan.refuse(item, f"takeoff altitude {plan.shown(item.alt)}: not a number (latitude "
+                                        f"{plan.shown(item.lat)}, longitude {plan.shown(item.lon)}: it takes off "
+                                        "where it is)")
             z = 0.0 if cmd == NAV_LAND else _local(plan, home, replace(item, lat=home.lat, lon=home.lon),
                                                    envelope_m)[2]
         else:

@@ -207,6 +207,24 @@ def test_a_takeoff_with_one_of_the_two_given_is_refused_naming_both(capsys: Any,
                    "both (the takeoff point) or neither (both null: take off where it is)"], err
 
 
+@pytest.mark.parametrize("at", [(None, None), (0, 0)], ids=["null", "zero"])
+def test_a_takeoff_here_without_an_altitude_is_refused_naming_what_the_file_gives(capsys: Any, tmp_path: Path,
+                                                                                  at: tuple[Any, Any]) -> None:
+    """A takeoff here (null, null or 0, 0) whose altitude is null: refused naming its altitude and the latitude and
+    longitude the file gives. Until the forty-fifth session's review the refusal named the home's, which the route
+    puts in their place to find the altitude (``coordinates must be numbers, got lat 47.397742, lon 8.545594, alt
+    null`` of a file holding null, null, null)."""
+    plan = _plan((None, None), takeoff=at)
+    plan["mission"]["items"][0]["params"][6] = None
+    path = tmp_path / "noalt.plan"
+    path.write_text(json.dumps(plan))
+    assert main(["sim", str(path), "--no-plots", "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    shown = "null" if at[0] is None else "0.0"
+    assert err == [f"bsst: {path}: mission.items[0] (NAV_TAKEOFF (22)): takeoff altitude null: not a number "
+                   f"(latitude {shown}, longitude {shown}: it takes off where it is)"], err
+
+
 def test_the_parser_takes_a_takeoff_with_no_position_and_sends_it_back_as_given() -> None:
     """MISSION_ITEM NaN, NaN and MISSION_ITEM_INT INT32_MAX, INT32_MAX on a NAV_TAKEOFF: held as NOT_GIVEN,
     downloaded as each form writes "not given", given to the route as NaN, NaN; one of the two alone refused."""
