@@ -45,6 +45,7 @@ from tests.sitlkit import (
     tlog_messages,
     unexplained_outages,
 )
+from tests.test_air_at_start import EVENT, HEAD
 from tests.waiting import wait_for
 
 pytestmark = pytest.mark.process  # starts processes or opens sockets: not in make test-fast
@@ -799,3 +800,17 @@ def test_the_battery_failsafe_flies_in_lockstep_as_offline_and_the_ground_statio
     assert crit[:2] == ["battery: low: 8.0 % left (BAT_LOW_THR = 15 %)",
                         "battery: critical: 7.0 % left (BAT_CRIT_THR = 7 %)"], texts
     assert states[0] == mavlink.MAV_BATTERY_CHARGE_STATE_LOW, states  # (0.5 Hz of wall time: CRITICAL, test_inject)
+
+
+def test_sitl_names_a_t0_wind_event_where_it_was_given(tmp_path: Path) -> None:
+    """``bsst sitl`` of tests/test_air_at_start.py's mission ([wind] 10 m/s, an event of 3 m/s from 90 deg at 0 s):
+    its vehicle reads the run's copy of the mission (``run/mission.toml``), and
+    until the forty-fifth session's review the block and the line named that copy's event, where bsst sim and the
+    session's other lines name the file given (``m.toml: events (t_s = 0, kind = wind)``)."""
+    m = tmp_path / "m.toml"
+    m.write_text(HEAD + EVENT.format(t=0.0) + "[wind]\nspeed_mps = 10.0\n")
+    run = sitl(m, instance=None, out=tmp_path / "run", plots=False)
+    wind = run.summary["wind"]
+    assert wind["steady_at_start"] == {"speed_mps": 3.0, "from_deg": 90.0,
+                                       "by": f"{m}: events (t_s = 0, kind = wind)"}, wind  # run/mission.toml's before
+    assert wind["mean_speed_mps"] == pytest.approx(3.0, abs=0.01), wind

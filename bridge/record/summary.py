@@ -315,6 +315,10 @@ def session_summary(flight: Flight, facts: SessionFacts, joined: Joined, events:
     # the plant's own blocks as the vehicle reported them in its stats; the GPS outages from the trace and the
     # events' own texts (an injected fault's shown text names its sender)
     summary.update(plant_summary(vs.get("plant") or {}, arrays, [{**e.as_dict(), "text": e.text} for e in ev]))
+    start = flight.wind.start if flight.wind is not None else None
+    if start is not None and "steady_at_start" in summary.get("wind", {}):  # a t = 0 wind event: named where it was
+        summary["wind"]["steady_at_start"]["by"] = start[2]  # given, as the session's other lines name it (the
+        # vehicle read it from the run's copy of the mission, whose path it named)
     summary["timing"] = timing_block(joined, m.rate_hz, facts.wall_s, vs, cs)
     if facts.clock == "realtime":
         summary["timing"]["stalls"] = stalls_block(vs, cs, joined.k0, m.rate_hz, m.duration_s,
