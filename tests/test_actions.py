@@ -219,9 +219,9 @@ until("at_height", lambda: seen["modes"][-2:] == ["TAKEOFF", "HOLD"] and seen["g
 lat0, lon0, amsl, rel = seen["geo"]
 start = seen["ned"]
 R = 6371000.0
-lat = lat0 + (4.0 - start[0]) / R * 180.0 / math.pi
+lat = lat0 + (8.0 - start[0]) / R * 180.0 / math.pi
 out["goto"] = act.goto_location(lat, lon0, amsl - rel + 3.0, 0.0).name
-until("there", lambda: math.dist(seen["ned"], (4.0, start[1], 3.0)) < 0.1, 30)
+until("there", lambda: math.dist(seen["ned"], (8.0, start[1], 3.0)) < 0.1, 30)
 n_goto = len(seen["speeds"])
 out["rtl"] = act.return_to_launch().name
 until("rtl_seen", lambda: seen["modes"][-1] == "RETURN_TO_LAUNCH", 10)
@@ -240,13 +240,11 @@ sdk.destroy()
 
 
 def test_mavsdk_set_current_speed_slows_a_return_home_to_it(tmp_path: Path) -> None:
-    """MAVSDK's ``Action.set_current_speed(0.5)`` (DO_CHANGE_SPEED: speed type 1, 0.5 m/s) as Return begins, 4 m
+    """MAVSDK's ``Action.set_current_speed(0.5)`` (DO_CHANGE_SPEED: speed type 1, 0.5 m/s) as Return begins, 8 m
     north of home at 3 m, after a ``goto_location`` flown at the on-board controller's 2 m/s: the way home is flown at
     0.5 m/s, it lands at home, disarms and is in HOLD again (PX4's mode after a disarm). Ground speeds as MAVSDK saw
-    them: the on-board velocity loop overshoots its limit by ~15 % either way (2.31 m/s on the goto, 0.56-0.59 m/s
-    home, measured). ``get_return_to_launch_altitude`` reads RTL_RETURN_ALT: 30 m, PX4's multicopter default. (8 m
-    north until the forty-fifth session: the goto reached 2.31 m/s either way, and the way home, up the cone to 8 m
-    and down again at 0.5 m/s, was ~1 CPU-s of the vehicle's for nothing more checked.)"""
+    them: the on-board velocity loop overshoots its limit by ~15 % either way (2.31 m/s on the goto, 0.59 m/s home,
+    measured). ``get_return_to_launch_altitude`` reads RTL_RETURN_ALT: 30 m, PX4's multicopter default."""
     with instance_slot() as n:
         v = _vehicle(n, tmp_path, *FAST)
         try:
