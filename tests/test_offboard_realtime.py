@@ -630,4 +630,6 @@ def test_a_slow_answer_to_the_arm_is_no_stall_of_the_machine(tmp_path: Path) -> 
     done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
     assert done[0].outcome == "completed" and rc == controller_exit(ctl.lines), ctl.lines[-5:]
     waiting = stats_of(ctl.lines)["stalls_waiting"]
-    assert waiting["count"] <= 3, waiting  # 14 on the old code, one per ARM answered by silence
+    # 14 on the old code, one per ARM answered by silence; a loaded machine's real late wake-ups (>10 ms with both
+    # cores busy and a dozen runnable processes) are a few of those ~15 waits, never one each
+    assert waiting["count"] <= 7, waiting
