@@ -633,3 +633,54 @@ def test_a_slow_answer_to_the_arm_is_no_stall_of_the_machine(tmp_path: Path) -> 
     # 14 on the old code, one per ARM answered by silence; a loaded machine's real late wake-ups (>10 ms with both
     # cores busy and a dozen runnable processes) are a few of those ~15 waits, never one each
     assert waiting["count"] <= 7, waiting
+
+
+def test_a_first_state_come_late_is_no_stall_of_the_machine(tmp_path: Path) -> None:
+    """The scripted vehicle streams the five states the controller phase-locks on, then none for 0.5 s (heartbeats
+    on), then the mission's first state comes 0.2 s late (an older state, held up on the way as a SiK radio's
+    are) in the next one's stead, and the states after it on time. The mission starts with that state, its tick
+    where the state was due: 0.2 s back, the next tick due at once. The machine stalled nothing. Forty-fifth
+    session's review: the move of the schedule back was taken for the process's, and the next tick, on time, was
+    listed as the mission's stall of ~190 ms at t = 1 / rate, exit 1 (``bsst sitl`` of a 3 s sine ``--realtime
+    --link-profile sik-57600``: "the machine stalled the real-time loop 1 time(s), worst 66.4 ms (controller
+    66.4 ms at t=0.004 s)" in 3 of 6 runs)."""
+    held_back = 10  # periods: the first state's lateness past its tick
+    (tmp_path / "m.toml").write_text(MISSION)
+    v = ScriptedVehicle()
+    ctl = Proc.bsst("controller", str(tmp_path / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
+                    "--out", str(tmp_path / "run"), "--timeout", "20")
+    try:
+        deadline = time.monotonic() + 30
+        while not v.armed:  # heartbeats at 10 Hz until the controller arms us
+            assert time.monotonic() < deadline and ctl.p.poll() is None, "the controller never armed the vehicle"
+            v.heartbeat()
+            v.until(time.monotonic() + 0.1)
+        k = int((time.monotonic() + 0.05 - v.v0) / PERIOD)
+        for _ in range(PHASE_STATES):  # the states the controller phase-locks on, each at its time
+            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
+            v.odometry(k)
+            k += 1
+        k += RATE // 2  # 0.5 s of states never sent (the first of them, late, below): the vehicle's clock runs on
+        while time.monotonic() < v.v0 + k * PERIOD + WAY_DOWN_S - 0.1:  # heartbeats through the pause
+            v.heartbeat()
+            v.until(time.monotonic() + 0.1)
+        v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
+        v.odometry(k - held_back)  # the mission's first state, held_back periods late, in state k's stead
+        k += 1
+        while not v.disarmed:  # then the states at their times until the mission's end lands us
+            assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
+            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
+            v.odometry(k)
+            if k % 5 == 0:
+                v.heartbeat()
+            k += 1
+        rc = ctl.p.wait(timeout=20)
+    finally:
+        ctl.stop()
+        v.sock.close()
+    done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
+    stalls = stats_of(ctl.lines)["stalls"]
+    assert done[0].outcome == "completed" and rc == controller_exit(ctl.lines), ctl.lines[-5:]
+    # the loaded machine's own stalls may be listed (10-118 ms on the 2-core VM), not one of the first state's
+    # lateness at the tick after it (~180 ms at t = 0.02 s on the old code)
+    assert not [at for at in stalls["at"] if at[0] == round(1 / RATE, 3) and at[1] >= 150.0], stalls
