@@ -170,16 +170,20 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def link_flags_from_args(args: argparse.Namespace) -> dict[str, str]:
-    """The flag that gave each trace and the profile of :func:`link_table_from_args`'s table, as typed, by its place
-    there (``{"up.trace": "--link-trace", "down.trace": "--down-link-trace", "profile": "--link-profile"}``): the
-    table writes ``--link-trace F`` as ``--up-link-trace F --down-link-trace F``, and a refusal of that trace names
-    the flag the user gave (:attr:`bridge.core.overrides.Overrides.link_flags`); {} if none."""
+    """The flag that gave each per-direction entry and the profile of :func:`link_table_from_args`'s table, as typed,
+    by its place there (``{"up.trace": "--link-trace", "down.trace": "--down-link-trace", "up.delay_ms": "--delay",
+    "profile": "--link-profile"}``): the table writes ``--link-trace F`` as ``--up-link-trace F --down-link-trace
+    F``, ``--delay 40 --up-delay 10`` as ``up.delay_ms = 10, down.delay_ms = 40``, and a refusal names the flags the
+    user gave (:attr:`bridge.core.overrides.Overrides.link_flags`); {} if none."""
     out = {"profile": "--link-profile"} if getattr(args, "link_profile", None) is not None else {}
+    stems = [(key, stem) for stem, key, *_ in LINK_FLAGS] + [("blackouts", "blackout"), ("trace", "link-trace"),
+                                                             ("trace_loop", "link-trace-loop")]
     for d in ("up", "down"):
-        given = [f for dest, f in ((f"link_{d}_trace", f"--{d}-link-trace"), ("link_trace", "--link-trace"))
-                 if getattr(args, dest, None) is not None]
-        if given:  # (the direction's own flag wins, as in the table)
-            out[f"{d}.trace"] = given[0]
+        for key, stem in stems:
+            given = [f for dest, f in ((f"link_{d}_{key}", f"--{d}-{stem}"), (f"link_{key}", f"--{stem}"))
+                     if getattr(args, dest, None) is not None]
+            if given:  # (the direction's own flag wins, as in the table)
+                out[f"{d}.{key}"] = given[0]
     return out
 
 

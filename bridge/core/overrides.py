@@ -255,9 +255,11 @@ LINK_KEY_STEMS = {"delay_ms": "delay", "jitter_ms": "jitter", "loss_pct": "loss"
 
 def _replaced_link_flags(link: Mapping[str, Any], flags: Mapping[str, str] | None) -> list[str]:
     """The flags that laid ``link``'s settings of the two directions (a handover replaces those whole), as typed where
-    :attr:`Overrides.link_flags` has them, else by the key's own flag (both directions alike: ``--delay``; one:
-    ``--up-delay``; ``--jitter-dist`` and ``--link-seed`` have no direction); a ``--link-profile`` only if it gives no
-    guard key (those stay the flight's). The controller's guard keys are not the link's: not named."""
+    :attr:`Overrides.link_flags` has them (``--delay 40 --up-delay 10`` as typed, not as the table holds them:
+    ``--up-delay 10, --down-delay 40`` until the forty-fifth session's review), else by the key's own flag (both
+    directions alike: ``--delay``; one: ``--up-delay``; ``--jitter-dist`` and ``--link-seed`` have no direction); a
+    ``--link-profile`` only if it gives no guard key (those stay the flight's). The controller's guard keys are not
+    the link's: not named."""
     def shown(flag: str, v: Any) -> str:  # the flag with its value (a trace's file, a window's START:DURATION)
         if isinstance(v, bool) or not isinstance(v, (int, float, str, list, tuple)):
             return flag
@@ -269,7 +271,11 @@ def _replaced_link_flags(link: Mapping[str, Any], flags: Mapping[str, str] | Non
     out: list[str] = []
     for key, stem in LINK_KEY_STEMS.items():
         sides = {d: t[key] for d in DIRECTIONS if isinstance(t := link.get(d), Mapping) and key in t}
-        if key in link or (len(sides) == 2 and sides["up"] == sides["down"]) or (sides and key in ("jitter", "seed")):
+        typed = {d: flags[f"{d}.{key}"] for d in sides if flags and f"{d}.{key}" in flags}
+        if sides and len(typed) == len(sides):  # bsst's: each flag as typed, once (--delay 40 --up-delay 10)
+            laid = {typed[d]: v for d, v in sides.items()}  # (a flag of both ways: one value, named once)
+            out += [shown(f, laid[f]) for f in sorted(laid, key=lambda f: f.startswith(("--up-", "--down-")))]
+        elif key in link or (len(sides) == 2 and sides["up"] == sides["down"]) or (sides and key in ("jitter", "seed")):
             v = link[key] if key in link else next(iter(sides.values()))
             out.append(shown(laid_flag("trace", flags) if key == "trace" else f"--{stem}", v))
         else:
