@@ -36,6 +36,22 @@ def test_fixed_rate_keeps_its_phase_and_skips_what_it_missed():
     assert c.due(j) == pytest.approx(2.048)  # the schedule is kept, not re-based on the late tick
 
 
+def test_ticks_due_before_a_schedule_set_back_are_skipped_not_counted():
+    """A schedule set back 5 ticks (the mission's first state come late, docs/sitl.md "Stalls": its tick 0 where that
+    state was due, 5 periods before the tick that read it): ticks 1-5 were due by then, never the process's to wake
+    for, and are no overruns when the catch-up skips them; one past them it woke late for is (until the forty-fifth
+    session's review each was counted, 17-32 for a SiK radio's late first state). So are the first schedule's ticks
+    due before it was set."""
+    c = FixedRate(t0=2.0, rate_hz=250.0, skipped=3, behind=5)  # tick 5 due at 2.02: when it was set
+    assert c.catch_up(1, now=2.0201) == 5 and c.skipped == 3  # ticks 1-4 due before it: not counted
+    c = FixedRate(t0=2.0, rate_hz=250.0, behind=5)
+    assert c.catch_up(1, now=2.0281) == 7 and c.skipped == 1  # 1-5 not counted, 6 woken late for: counted
+    c = FixedRate(t0=2.0, rate_hz=250.0, behind=1)  # set at 2.006 (the first schedule, its ticks 0 and 1 past)
+    assert c.catch_up(0, now=2.0121) == 3 and c.skipped == 1  # 0 and 1 not counted, 2 woken late for: counted
+    c = FixedRate(t0=2.0, rate_hz=250.0)  # nothing behind: every tick skipped counted
+    assert c.catch_up(0, now=2.0121) == 3 and c.skipped == 3
+
+
 def test_a_stall_is_one_record_however_many_late_wake_ups_its_catch_up_makes():
     s = Stalls()
     s.note(1.000, STALL_S)  # at the threshold: the machine's ordinary jitter, not a stall

@@ -111,6 +111,7 @@ class FixedRate:
     t0: float
     rate_hz: float
     skipped: int = 0  # ticks skipped because the process woke more than a period late
+    behind: int = -1  # ticks up to this one were due before the schedule was set (in the past): skipped, not counted
 
     def due(self, j: int) -> float:
         return self.t0 + j / self.rate_hz
@@ -118,13 +119,13 @@ class FixedRate:
     def catch_up(self, j: int, now: float) -> int:
         """The tick to run at ``now`` when tick j was due: j itself unless ``now`` is more
         than a period past it, else the last tick due by ``now`` (the others are skipped and
-        counted)."""
+        counted, but for those up to :attr:`behind`: no wake-up of the process was due for them)."""
         late = now - self.due(j)
         period = 1.0 / self.rate_hz
         if late <= period:
             return j
         skip = int(late / period)
-        self.skipped += skip
+        self.skipped += max(0, j + skip - max(j, self.behind + 1))
         return j + skip
 
 

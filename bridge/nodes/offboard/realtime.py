@@ -76,7 +76,10 @@ class RealtimeFlying(OffboardLink):
             return locked
         phase, k0 = locked
         self._mission_zero = k0 * period  # the vehicle's clock at mission time 0 (s): its events on the mission's
-        self.schedule = clock = FixedRate(phase + k0 * period + PHASE_S, rate)
+        # (its first tick's state may have come late, past where the phase puts it: the ticks due by now are skipped,
+        # not overrun)
+        t0 = phase + k0 * period + PHASE_S
+        self.schedule = clock = FixedRate(t0, rate, behind=max(math.floor((mono() - t0) * rate), -1))
         self._held_waiting(clock.due(0))
         last_k = k0 - 1
         usec, recv = 0, math.nan  # the newest state's stamp and arrival
@@ -124,7 +127,9 @@ class RealtimeFlying(OffboardLink):
                     # a later one came with it, as states bunched on a busy machine do): the mission starts
                     # with it, as the trace and the vehicle's timeline do (their time 0 is the state the
                     # first target answers), its tick where its state was due (phase + k / rate)
-                    self.schedule = clock = FixedRate(due + (k - k0 - j) * period, rate, clock.skipped)
+                    # (moved back, the ticks due before this one's due are skipped, not overrun: none was the process's)
+                    self.schedule = clock = FixedRate(due + (k - k0 - j) * period, rate, clock.skipped,
+                                                      max(k0 + j - k, 0))
                     # the schedule moved, not the process: no stall at the next tick. Moved on (a later state came at
                     # once), the next tick is that much further off; moved back (an older state came late, as a
                     # radio's first one does), it is due at once: the process woke when it woke (counting the move
