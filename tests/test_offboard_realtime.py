@@ -22,6 +22,8 @@ import signal
 import socket
 import time
 from collections import Counter
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -153,6 +155,17 @@ class ScriptedVehicle:
                 select.select([self.sock], [], [], left - 0.0005)
             self.serve()
 
+    def due(self, k: int) -> float:
+        """Wall time at which the state of step k leaves: its time on the vehicle's clock, plus WAY_DOWN_S."""
+        return self.v0 + k * PERIOD + WAY_DOWN_S
+
+    def on_time(self, k: int, n: int) -> int:
+        """The states of steps k to k + n - 1, each at its time (:meth:`due`); the step after them."""
+        for j in range(k, k + n):
+            self.until(self.due(j))
+            self.odometry(j)
+        return k + n
+
     def odometry(self, k: int, usec: int | None = None) -> None:
         """The state of step k, stamped with its time (or ``usec``, a stamp of the test's choosing)."""
         pos, q, vel, rates = state_to_odometry(HOVER)
@@ -177,6 +190,48 @@ class Flown:
     timesync_asked: list[float]  # wall time of each TIMESYNC request, s from the first target (< 0: before it)
 
 
+@contextmanager
+def controller_for(tmp: Path, v: ScriptedVehicle, *extra: str, mission: str = MISSION,
+                   realtime: bool = True) -> Iterator[Proc]:
+    """``bsst controller`` flying ``mission`` (``--realtime``, unless not) against ``v``, its run in tmp/run,
+    ``extra`` its further flags; stopped (continued first, if a test stopped it) and ``v`` closed on the way out."""
+    (tmp / "m.toml").write_text(mission)
+    ctl = Proc.bsst("controller", str(tmp / "m.toml"), *(["--realtime"] if realtime else []),
+                    "--vehicle", f"127.0.0.1:{v.port}", "--out", str(tmp / "run"), "--timeout", "20", *extra)
+    try:
+        yield ctl
+    finally:
+        if ctl.p.poll() is None:  # a test's SIGSTOP must not outlive it
+            os.kill(ctl.p.pid, signal.SIGCONT)
+        ctl.stop()
+        v.sock.close()
+
+
+def heartbeats_until(v: ScriptedVehicle, ctl: Proc, deadline: float, done: Callable[[], bool],
+                     what: str = "the controller never armed the vehicle") -> None:
+    """Heartbeats at 10 Hz, the controller served, until ``done()`` (by default: it armed us, its ACK sent in
+    :meth:`ScriptedVehicle.serve`); ``what`` if it has not by ``deadline`` or has exited."""
+    while not done():
+        assert time.monotonic() < deadline and ctl.p.poll() is None, what
+        v.heartbeat()
+        v.until(time.monotonic() + 0.1)
+
+
+def stream(v: ScriptedVehicle, ctl: Proc, deadline: float, k: int, each: Callable[[int], bool] | None = None) -> None:
+    """The states from step k on at their times (:meth:`ScriptedVehicle.due`), a heartbeat with every fifth step,
+    until the mission's end lands us. ``each(k)``, before step k's state: True when it served this round itself
+    (the state not sent yet)."""
+    while not v.disarmed:
+        assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
+        if each is not None and each(k):
+            continue
+        v.until(v.due(k))
+        v.odometry(k)
+        if k % 5 == 0:
+            v.heartbeat()
+        k += 1
+
+
 def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None = None, bunched: bool = False,
         in_progress_after: bool = False, timesync_hold_s: tuple[float, float] | None = None) -> Flown:
     """One real-time flight of ``bsst controller`` against the scripted vehicle: state k
@@ -186,12 +241,9 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
     ``bunched``: the state of step 6 leaves at step 5's time (step 5's lost), so that it comes within the
     mission's first tick, as states bunched by a busy machine's scheduling do. ``timesync_hold_s``: the vehicle's
     TIMESYNC answers held up one way each (:class:`ScriptedVehicle`)."""
-    (tmp / "late.toml").write_text(MISSION)
     v = ScriptedVehicle(timesync_skew_s, in_progress_after, timesync_hold_s)
     sent_late: dict[int, float] = {}
-    ctl = Proc.bsst("controller", str(tmp / "late.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
-                    "--out", str(tmp / "run"), "--timeout", "20")
-    try:
+    with controller_for(tmp, v) as ctl:
         deadline = time.monotonic() + 30
         next_hb = 0.0
         while not v.armed:  # heartbeats at 10 Hz until the controller arms us
@@ -204,7 +256,7 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
         while not v.disarmed:  # stream until the mission's end lands us (1.4 s of steps)
             assert k - k_first < 5 * RATE and ctl.p.poll() is None, f"no disarm after {k - k_first} steps"
             i = k - k_first
-            due = v.v0 + k * PERIOD + WAY_DOWN_S + (LATE_S if i in LATE else 0.0)
+            due = v.due(k) + (LATE_S if i in LATE else 0.0)
             v.until(due)
             if i not in DROPPED:
                 v.odometry(k)
@@ -218,9 +270,6 @@ def fly(tmp: Path, timesync_skew_s: float = 0.0, spoofs: dict[int, int] | None =
                 v.heartbeat()
             k += 1
         rc = ctl.p.wait(timeout=20)
-    finally:
-        ctl.stop()
-        v.sock.close()
     assert rc == controller_exit(ctl.lines), ctl.lines[-10:]  # 1 only for the machine's stalls of its ticks
     # steps renumbered from the first one streamed, as LATE and DROPPED count them
     targets = Counter({(usec - step_usec(k_first, RATE)) // step_usec(1, RATE): n for usec, n in v.targets.items()})
@@ -398,17 +447,12 @@ def test_a_scheduled_change_pending_at_a_lockstep_flights_end_is_not_resent(tmp_
     echo, then lands). Until the third wave's fortieth session it was resent every 0.2 s of that 1 s wait
     (``vehicle_t() > end_t``, the held clock equal to the end): into the landing, in a flight that had ended."""
     steps = 10
-    (tmp_path / "end.toml").write_text(MISSION.replace("duration_s = 1.4", f"duration_s = {steps / RATE:g}"))
     v = ScriptedVehicle()
-    ctl = Proc.bsst("controller", str(tmp_path / "end.toml"), "--vehicle", f"127.0.0.1:{v.port}",
-                    "--out", str(tmp_path / "run"), "--timeout", "20",
-                    "--param-at", f"{(steps - 1) / RATE:g}:MIS_TAKEOFF_ALT=5")  # the last step's
-    try:
+    with controller_for(tmp_path, v, "--param-at", f"{(steps - 1) / RATE:g}:MIS_TAKEOFF_ALT=5",  # the last step's
+                        mission=MISSION.replace("duration_s = 1.4", f"duration_s = {steps / RATE:g}"),
+                        realtime=False) as ctl:
         deadline = time.monotonic() + 30
-        while not v.armed:  # heartbeats at 10 Hz until the controller arms us
-            assert time.monotonic() < deadline and ctl.p.poll() is None, "the controller never armed the vehicle"
-            v.heartbeat()
-            v.until(time.monotonic() + 0.1)
+        heartbeats_until(v, ctl, deadline, lambda: v.armed)
         k0 = 1000
         while not v.disarmed:  # a state, then the next once it is answered; the mission's end lands us
             assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
@@ -418,9 +462,6 @@ def test_a_scheduled_change_pending_at_a_lockstep_flights_end_is_not_resent(tmp_
                 v.odometry(k)
             v.until(time.monotonic() + 0.002)
         ctl.p.wait(timeout=20)
-    finally:
-        ctl.stop()
-        v.sock.close()
     assert v.states_sent == steps + 1  # the mission's steps and the state that ended it
     assert v.param_sets == [steps], v.param_sets  # one, with the last step's state: none after the end's state
     [sent] = stats_of(ctl.lines)["param_at"]
@@ -483,45 +524,31 @@ def test_a_stall_while_the_first_state_is_awaited_is_not_the_missions(tmp_path: 
     the mission is flown: exit 0, nothing said; the stall is listed apart (``stalls_waiting``), not as the
     mission's. Until the forty-first session's review it was the mission's, stamped at the waiting tick's j / rate
     (inside the mission's time): ``not flown as asked: the machine stalled the real-time loop``, exit 1."""
-    (tmp_path / "m.toml").write_text(MISSION)
     v = ScriptedVehicle()
-    ctl = Proc.bsst("controller", str(tmp_path / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
-                    "--out", str(tmp_path / "run"), "--timeout", "20")
     stopped = False
-    try:
+    with controller_for(tmp_path, v) as ctl:
         deadline = time.monotonic() + 30
-        while not v.armed:  # heartbeats at 10 Hz until the controller arms us
-            assert time.monotonic() < deadline and ctl.p.poll() is None, "the controller never armed the vehicle"
-            v.heartbeat()
-            v.until(time.monotonic() + 0.1)
-        k = int((time.monotonic() + 0.05 - v.v0) / PERIOD)
-        for _ in range(PHASE_STATES):  # the states the controller phase-locks on, each at its time
-            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
-            v.odometry(k)
-            k += 1
+        heartbeats_until(v, ctl, deadline, lambda: v.armed)
+        # the states the controller phase-locks on, each at its time; then 1 s of states never sent (the vehicle's
+        # clock runs on)
+        k = v.on_time(int((time.monotonic() + 0.05 - v.v0) / PERIOD), PHASE_STATES) + RATE
         pause = time.monotonic()
-        k += RATE  # 1 s of states never sent: the vehicle's clock runs on
-        while not v.disarmed:  # heartbeats through the pause, then states until the mission's end lands us
-            assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
+
+        def paused(k: int) -> bool:  # heartbeats through the pause, the controller stopped 0.2 s of it
+            nonlocal stopped
             if not stopped and time.monotonic() >= pause + 0.4:  # its ticks have waited 0.4 s for the first state
                 os.kill(ctl.p.pid, signal.SIGSTOP)
                 time.sleep(0.2)  # the stall itself, not a wait for something to happen
                 os.kill(ctl.p.pid, signal.SIGCONT)
                 stopped = True
-            due = v.v0 + k * PERIOD + WAY_DOWN_S
-            if due - time.monotonic() > PERIOD:  # the pause: a heartbeat each 0.1 s
+            if v.due(k) - time.monotonic() > PERIOD:  # the pause: a heartbeat each 0.1 s
                 v.heartbeat()
-                v.until(min(due - PERIOD, time.monotonic() + 0.1))
-                continue
-            v.until(due)
-            v.odometry(k)
-            if k % 5 == 0:
-                v.heartbeat()
-            k += 1
+                v.until(min(v.due(k) - PERIOD, time.monotonic() + 0.1))
+                return True
+            return False
+
+        stream(v, ctl, deadline, k, paused)
         rc = ctl.p.wait(timeout=20)
-    finally:
-        ctl.stop()
-        v.sock.close()
     assert stopped
     done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
     values = stats_of(ctl.lines)
@@ -543,36 +570,23 @@ def test_a_stall_between_the_arm_and_the_first_target_is_listed_apart_and_the_fl
     forty-fifth session nothing noted it (the waits for the ARM's answer and the phase-lock watched no clock), and the
     phase was taken from the states read late in a bunch: against the real vehicle a 0.3 s stall there left every
     state 0.25 s old, no target went out and its failsafe took over 0.5 s after the arm, said as a failsafe only."""
-    (tmp_path / "m.toml").write_text(MISSION)
     v = ScriptedVehicle()
-    ctl = Proc.bsst("controller", str(tmp_path / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
-                    "--out", str(tmp_path / "run"), "--timeout", "20")
-    try:
+    with controller_for(tmp_path, v) as ctl:
         deadline = time.monotonic() + 30
-        while not v.armed:  # heartbeats at 10 Hz until the controller arms us (its ACK sent in v.serve)
-            assert time.monotonic() < deadline and ctl.p.poll() is None, "the controller never armed the vehicle"
-            v.heartbeat()
-            v.until(time.monotonic() + 0.1)
+        heartbeats_until(v, ctl, deadline, lambda: v.armed)
         os.kill(ctl.p.pid, signal.SIGSTOP)  # at once: the ARM's answer not read yet, or just, no state sent yet
         armed = time.monotonic()
-        k = int((armed - v.v0) / PERIOD) + 1
         resumed = False
-        while not v.disarmed:  # states at their times, through the stop, until the mission's end lands us
-            assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
+
+        def resume(_k: int) -> bool:  # states at their times through the stop
+            nonlocal resumed
             if not resumed and time.monotonic() >= armed + 0.3:  # the stall itself: 0.3 s of states queued
                 os.kill(ctl.p.pid, signal.SIGCONT)
                 resumed = True
-            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
-            v.odometry(k)
-            if k % 5 == 0:
-                v.heartbeat()
-            k += 1
+            return False
+
+        stream(v, ctl, deadline, int((armed - v.v0) / PERIOD) + 1, resume)
         rc = ctl.p.wait(timeout=20)
-    finally:
-        if ctl.p.poll() is None:
-            os.kill(ctl.p.pid, signal.SIGCONT)
-        ctl.stop()
-        v.sock.close()
     done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
     values = stats_of(ctl.lines)
     waiting = values["stalls_waiting"]
@@ -599,34 +613,18 @@ def test_a_slow_answer_to_the_arm_is_no_stall_of_the_machine(tmp_path: Path) -> 
     --realtime --link-profile sik-57600``, idle: "the machine stalled the controller 5 time(s) before the mission's
     first state (after the vehicle's arm), worst 32.7 ms: no target meanwhile"). A real stall of a loaded machine
     may be listed: a few at most in those 1.5 s, not one per ARM sent."""
-    (tmp_path / "m.toml").write_text(MISSION)
     v = ScriptedVehicle()
     v.deaf_until = math.inf
-    ctl = Proc.bsst("controller", str(tmp_path / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
-                    "--out", str(tmp_path / "run"), "--timeout", "20")
-    try:
+    with controller_for(tmp_path, v) as ctl:
         deadline = time.monotonic() + 30
-        while v.first_arm is None:  # heartbeats at 10 Hz until its first ARM comes
-            assert time.monotonic() < deadline and ctl.p.poll() is None, "the controller never sent its ARM"
-            v.heartbeat()
-            v.until(time.monotonic() + 0.1)
+        heartbeats_until(v, ctl, deadline, lambda: v.first_arm is not None, "the controller never sent its ARM")
         v.deaf_until = v.first_arm + 1.5
         v.until(v.deaf_until)  # silent: its ARMs read, none answered
         while not v.armed:  # the next ARM is answered
             assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
             v.until(time.monotonic() + 0.01)
-        k = int((time.monotonic() - v.v0) / PERIOD) + 1
-        while not v.disarmed:  # states at their times until the mission's end lands us
-            assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
-            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
-            v.odometry(k)
-            if k % 5 == 0:
-                v.heartbeat()
-            k += 1
+        stream(v, ctl, deadline, int((time.monotonic() - v.v0) / PERIOD) + 1)
         rc = ctl.p.wait(timeout=20)
-    finally:
-        ctl.stop()
-        v.sock.close()
     done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
     assert done[0].outcome == "completed" and rc == controller_exit(ctl.lines), ctl.lines[-5:]
     waiting = stats_of(ctl.lines)["stalls_waiting"]
@@ -645,39 +643,20 @@ def test_a_first_state_come_late_is_no_stall_of_the_machine(tmp_path: Path) -> N
     --link-profile sik-57600``: "the machine stalled the real-time loop 1 time(s), worst 66.4 ms (controller
     66.4 ms at t=0.004 s)" in 3 of 6 runs)."""
     held_back = 10  # periods: the first state's lateness past its tick
-    (tmp_path / "m.toml").write_text(MISSION)
     v = ScriptedVehicle()
-    ctl = Proc.bsst("controller", str(tmp_path / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
-                    "--out", str(tmp_path / "run"), "--timeout", "20")
-    try:
+    with controller_for(tmp_path, v) as ctl:
         deadline = time.monotonic() + 30
-        while not v.armed:  # heartbeats at 10 Hz until the controller arms us
-            assert time.monotonic() < deadline and ctl.p.poll() is None, "the controller never armed the vehicle"
+        heartbeats_until(v, ctl, deadline, lambda: v.armed)
+        # the states the controller phase-locks on, each at its time; then 0.5 s of states never sent (the first of
+        # them, late, below): the vehicle's clock runs on
+        k = v.on_time(int((time.monotonic() + 0.05 - v.v0) / PERIOD), PHASE_STATES) + RATE // 2
+        while time.monotonic() < v.due(k) - 0.1:  # heartbeats through the pause
             v.heartbeat()
             v.until(time.monotonic() + 0.1)
-        k = int((time.monotonic() + 0.05 - v.v0) / PERIOD)
-        for _ in range(PHASE_STATES):  # the states the controller phase-locks on, each at its time
-            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
-            v.odometry(k)
-            k += 1
-        k += RATE // 2  # 0.5 s of states never sent (the first of them, late, below): the vehicle's clock runs on
-        while time.monotonic() < v.v0 + k * PERIOD + WAY_DOWN_S - 0.1:  # heartbeats through the pause
-            v.heartbeat()
-            v.until(time.monotonic() + 0.1)
-        v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
+        v.until(v.due(k))
         v.odometry(k - held_back)  # the mission's first state, held_back periods late, in state k's stead
-        k += 1
-        while not v.disarmed:  # then the states at their times until the mission's end lands us
-            assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
-            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
-            v.odometry(k)
-            if k % 5 == 0:
-                v.heartbeat()
-            k += 1
+        stream(v, ctl, deadline, k + 1)  # then the states at their times
         rc = ctl.p.wait(timeout=20)
-    finally:
-        ctl.stop()
-        v.sock.close()
     done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
     values = stats_of(ctl.lines)
     stalls = values["stalls"]
@@ -699,36 +678,16 @@ def test_ticks_due_before_the_schedule_was_set_are_no_overruns(tmp_path: Path) -
     session's review: the ticks the catch-up skipped were counted in ``overruns``, the ticks the process "woke more
     than a period late" for (7 here; 17-32 for a SiK radio's late first state in ``bsst sitl --realtime
     --link-profile sik-57600``'s ``timing.overruns``, no stall met)."""
-    (tmp_path / "m.toml").write_text(MISSION)
     v = ScriptedVehicle()
-    ctl = Proc.bsst("controller", str(tmp_path / "m.toml"), "--realtime", "--vehicle", f"127.0.0.1:{v.port}",
-                    "--out", str(tmp_path / "run"), "--timeout", "20")
-    try:
+    with controller_for(tmp_path, v) as ctl:
         deadline = time.monotonic() + 30
-        while not v.armed:  # heartbeats at 10 Hz until the controller arms us
-            assert time.monotonic() < deadline and ctl.p.poll() is None, "the controller never armed the vehicle"
-            v.heartbeat()
-            v.until(time.monotonic() + 0.1)
-        k = int((time.monotonic() + 0.05 - v.v0) / PERIOD)
-        for _ in range(PHASE_STATES - 1):  # at their times
-            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
-            v.odometry(k)
-            k += 1
-        v.until(v.v0 + (k + 5) * PERIOD + WAY_DOWN_S)  # the last two, 5 and 4 periods late
+        heartbeats_until(v, ctl, deadline, lambda: v.armed)
+        k = v.on_time(int((time.monotonic() + 0.05 - v.v0) / PERIOD), PHASE_STATES - 1)  # at their times
+        v.until(v.due(k + 5))  # the last two, 5 and 4 periods late
         v.odometry(k)
         v.odometry(k + 1)
-        k += 6
-        while not v.disarmed:  # then the states at their times until the mission's end lands us
-            assert time.monotonic() < deadline and ctl.p.poll() is None, ctl.lines[-10:]
-            v.until(v.v0 + k * PERIOD + WAY_DOWN_S)
-            v.odometry(k)
-            if k % 5 == 0:
-                v.heartbeat()
-            k += 1
+        stream(v, ctl, deadline, k + 6)  # then the states at their times
         rc = ctl.p.wait(timeout=20)
-    finally:
-        ctl.stop()
-        v.sock.close()
     done = [r for r in map(parse_line, ctl.lines) if isinstance(r, Done)]
     values = stats_of(ctl.lines)
     assert done[0].outcome == "completed" and rc == controller_exit(ctl.lines), ctl.lines[-5:]
