@@ -52,15 +52,37 @@ def _plan(land: tuple[Any, Any], takeoff: tuple[Any, Any] = (0, 0)) -> dict[str,
                                   item(2, 21, *land, 0.0)]}}
 
 
+def _here_file(tmp_path: Path, kind: str, stem: str, takeoff: tuple[Any, Any]) -> Path:
+    """:func:`_plan`'s mission with its land here (null, null), as a .plan or as a waypoint file (null there: nan),
+    written as tmp_path/stem.plan or .waypoints."""
+    if kind == "plan":
+        path = tmp_path / f"{stem}.plan"
+        path.write_text(json.dumps(_plan((None, None), takeoff=takeoff), indent=4))
+        return path
+    lat, lon = ("nan" if v is None else str(v) for v in takeoff)
+    path = tmp_path / f"{stem}.waypoints"
+    path.write_text("QGC WPL 110\n"
+                    f"0\t1\t0\t16\t0\t0\t0\t0\t{HOME[0]}\t{HOME[1]}\t{HOME[2]}\t1\n"
+                    f"1\t0\t3\t22\t0\t0\t0\tnan\t{lat}\t{lon}\t1.0\t1\n"
+                    f"2\t0\t3\t16\t0\t0\t0\tnan\t{HOME[0] + NORTH!r}\t{HOME[1]}\t1.0\t1\n"
+                    "3\t0\t3\t21\t0\t0\t0\tnan\tnan\tnan\t0\t1\n")
+    return path
+
+
 def _last_row(run: Path) -> dict[str, float]:
     lines = (run / "trace.csv").read_text().splitlines()
     return {k: float(v) for k, v in zip(lines[0].split(","), lines[-1].split(","), strict=False)}
 
 
-def _landed_at_the_waypoint(run: Path) -> None:
+def _landed_at(run: Path, at: tuple[float, float]) -> None:
+    """The trace's last row is on the ground within 5 cm of ``at`` (x, y m, paper frame)."""
     end = _last_row(run)
-    assert math.dist((end["x"], end["y"]), WAYPOINT) < 0.05, (end["x"], end["y"], WAYPOINT)
+    assert math.dist((end["x"], end["y"]), at) < 0.05, (end["x"], end["y"], at)
     assert end["z"] < 0.01, end["z"]
+
+
+def _landed_at_the_waypoint(run: Path) -> None:
+    _landed_at(run, WAYPOINT)
     summary = json.loads((run / "summary.json").read_text())
     assert summary["outcome"] == "completed" and summary["end"]["disarmed"], summary["outcome"]
 
@@ -68,16 +90,7 @@ def _landed_at_the_waypoint(run: Path) -> None:
 @pytest.mark.parametrize("kind", ["plan", "waypoints"])
 def test_a_files_land_with_no_position_lands_where_it_is(capsys: Any, tmp_path: Path, kind: str) -> None:
     """A .plan's null, null and a waypoint file's nan, nan: the flight lands under the waypoint, not at the home."""
-    if kind == "plan":
-        path = tmp_path / "here.plan"
-        path.write_text(json.dumps(_plan((None, None)), indent=4))
-    else:
-        path = tmp_path / "here.waypoints"
-        path.write_text("QGC WPL 110\n"
-                        f"0\t1\t0\t16\t0\t0\t0\t0\t{HOME[0]}\t{HOME[1]}\t{HOME[2]}\t1\n"
-                        "1\t0\t3\t22\t0\t0\t0\tnan\t0\t0\t1.0\t1\n"
-                        f"2\t0\t3\t16\t0\t0\t0\tnan\t{HOME[0] + NORTH!r}\t{HOME[1]}\t1.0\t1\n"
-                        "3\t0\t3\t21\t0\t0\t0\tnan\tnan\tnan\t0\t1\n")
+    path = _here_file(tmp_path, kind, "here", (0, 0))
     out = tmp_path / "run"
     assert main(["sim", str(path), "--no-plots", "--out", str(out)]) == 0, capsys.readouterr().err
     _landed_at_the_waypoint(out)
@@ -162,10 +175,7 @@ def test_an_uploaded_land_with_no_position_is_flown_where_it_is(tmp_path: Path) 
              _legacy(2, M.MAV_CMD_NAV_LAND, math.nan, math.nan, 0.0)]
     _, out = _upload_and_fly(tmp_path, items)
     # the waypoint as a MISSION_ITEM carried it: float32 degrees (about 0.2 m apart)
-    at = Home(*HOME).paper(float(np.float32(HOME[0] + NORTH)), float(np.float32(HOME[1])), HOME[2])[:2]
-    end = _last_row(out)
-    assert math.dist((end["x"], end["y"]), at) < 0.05, (end["x"], end["y"], at)
-    assert end["z"] < 0.01, end["z"]
+    _landed_at(out, Home(*HOME).paper(float(np.float32(HOME[0] + NORTH)), float(np.float32(HOME[1])), HOME[2])[:2])
 
 
 def _took_off_over_the_home(run: Path) -> None:
@@ -182,16 +192,7 @@ def test_a_files_takeoff_with_no_position_takes_off_where_it_is(capsys: Any, tmp
     """A .plan's takeoff at null, null and a waypoint file's at nan, nan (then the waypoint, a land here): flown,
     straight up over the home, landed under the waypoint. The old code refused it (``coordinates must be numbers``,
     exit 2)."""
-    if kind == "plan":
-        path = tmp_path / "up.plan"
-        path.write_text(json.dumps(_plan((None, None), takeoff=(None, None)), indent=4))
-    else:
-        path = tmp_path / "up.waypoints"
-        path.write_text("QGC WPL 110\n"
-                        f"0\t1\t0\t16\t0\t0\t0\t0\t{HOME[0]}\t{HOME[1]}\t{HOME[2]}\t1\n"
-                        "1\t0\t3\t22\t0\t0\t0\tnan\tnan\tnan\t1.0\t1\n"
-                        f"2\t0\t3\t16\t0\t0\t0\tnan\t{HOME[0] + NORTH!r}\t{HOME[1]}\t1.0\t1\n"
-                        "3\t0\t3\t21\t0\t0\t0\tnan\tnan\tnan\t0\t1\n")
+    path = _here_file(tmp_path, kind, "up", (None, None))
     out = tmp_path / "run"
     assert main(["sim", str(path), "--no-plots", "--out", str(out)]) == 0, capsys.readouterr().err
     _took_off_over_the_home(out)
@@ -255,7 +256,4 @@ def test_an_uploaded_takeoff_with_no_position_is_flown_where_it_is(tmp_path: Pat
              _int(2, M.MAV_CMD_NAV_LAND, INT32_MAX, INT32_MAX, 0.0)]
     _, out = _upload_and_fly(tmp_path, items)
     _took_off_over_the_home(out)
-    at = Home(*HOME).paper(round((HOME[0] + NORTH) * 1e7) / 1e7, round(HOME[1] * 1e7) / 1e7, HOME[2])[:2]
-    end = _last_row(out)
-    assert math.dist((end["x"], end["y"]), at) < 0.05, (end["x"], end["y"], at)
-    assert end["z"] < 0.01, end["z"]
+    _landed_at(out, Home(*HOME).paper(round((HOME[0] + NORTH) * 1e7) / 1e7, round(HOME[1] * 1e7) / 1e7, HOME[2])[:2])
