@@ -115,12 +115,11 @@ def _int(seq: int, cmd: int, x: int, y: int, alt: float) -> Any:
                                               0.0, math.nan, x, y, alt, 0)
 
 
-def test_the_parser_takes_a_land_with_no_position_and_sends_it_back_as_given() -> None:
-    """MISSION_ITEM NaN, NaN and MISSION_ITEM_INT INT32_MAX, INT32_MAX on a NAV_LAND: held as NOT_GIVEN, downloaded
-    as each form writes "not given", and flown as a land here (plan_of: NaN, NaN). On a waypoint, or one of the two
-    alone, refused as before."""
-    for msg, int_mode in ((_legacy(2, M.MAV_CMD_NAV_LAND, math.nan, math.nan, 0.0), False),
-                          (_int(2, M.MAV_CMD_NAV_LAND, INT32_MAX, INT32_MAX, 0.0), True)):
+def _held_as_not_given(seq: int, cmd: int, alt: float) -> None:
+    """``cmd``'s MISSION_ITEM at NaN, NaN and MISSION_ITEM_INT at INT32_MAX, INT32_MAX: each held as NOT_GIVEN,
+    downloaded as each form writes "not given" (NaN; INT32_MAX), given to the route as NaN, NaN."""
+    for msg, int_mode in ((_legacy(seq, cmd, math.nan, math.nan, alt), False),
+                          (_int(seq, cmd, INT32_MAX, INT32_MAX, alt), True)):
         it = parse_item(msg, int_mode)
         assert (it.x, it.y) == NOT_GIVEN
         back = item_message(it, (255, 190), False, False)
@@ -129,14 +128,25 @@ def test_the_parser_takes_a_land_with_no_position_and_sends_it_back_as_given() -
         assert (back.x, back.y) == (INT32_MAX, INT32_MAX)
         plan = plan_of((it,), HOME, "held")
         assert math.isnan(plan.items[0].lat) and math.isnan(plan.items[0].lon)
-    for msg, int_mode, result in (
-            (_legacy(2, M.MAV_CMD_NAV_LAND, math.nan, HOME[1], 0.0), False, M.MAV_MISSION_INVALID_PARAM5_X),
-            (_legacy(2, M.MAV_CMD_NAV_LAND, HOME[0], math.nan, 0.0), False, M.MAV_MISSION_INVALID_PARAM6_Y),
-            (_legacy(2, M.MAV_CMD_NAV_WAYPOINT, math.nan, math.nan, 1.0), False, M.MAV_MISSION_INVALID_PARAM5_X),
-            (_int(2, M.MAV_CMD_NAV_WAYPOINT, INT32_MAX, INT32_MAX, 1.0), True, M.MAV_MISSION_INVALID_PARAM5_X)):
+
+
+def _refused(*cases: tuple[Any, bool, int]) -> None:
+    """Each (message, whether a MISSION_ITEM_INT, MAV_MISSION_RESULT): the parser refuses it with that result."""
+    for msg, int_mode, result in cases:
         with pytest.raises(ItemRefused) as exc:
             parse_item(msg, int_mode)
         assert exc.value.result == result
+
+
+def test_the_parser_takes_a_land_with_no_position_and_sends_it_back_as_given() -> None:
+    """MISSION_ITEM NaN, NaN and MISSION_ITEM_INT INT32_MAX, INT32_MAX on a NAV_LAND: held as NOT_GIVEN, downloaded
+    as each form writes "not given", and flown as a land here (plan_of: NaN, NaN). On a waypoint, or one of the two
+    alone, refused as before."""
+    _held_as_not_given(2, M.MAV_CMD_NAV_LAND, 0.0)
+    _refused((_legacy(2, M.MAV_CMD_NAV_LAND, math.nan, HOME[1], 0.0), False, M.MAV_MISSION_INVALID_PARAM5_X),
+             (_legacy(2, M.MAV_CMD_NAV_LAND, HOME[0], math.nan, 0.0), False, M.MAV_MISSION_INVALID_PARAM6_Y),
+             (_legacy(2, M.MAV_CMD_NAV_WAYPOINT, math.nan, math.nan, 1.0), False, M.MAV_MISSION_INVALID_PARAM5_X),
+             (_int(2, M.MAV_CMD_NAV_WAYPOINT, INT32_MAX, INT32_MAX, 1.0), True, M.MAV_MISSION_INVALID_PARAM5_X))
 
 
 def _upload_and_fly(tmp_path: Path, items: list[Any]) -> tuple[dict[str, Any], Path]:
@@ -229,22 +239,9 @@ def test_a_takeoff_here_without_an_altitude_is_refused_naming_what_the_file_give
 def test_the_parser_takes_a_takeoff_with_no_position_and_sends_it_back_as_given() -> None:
     """MISSION_ITEM NaN, NaN and MISSION_ITEM_INT INT32_MAX, INT32_MAX on a NAV_TAKEOFF: held as NOT_GIVEN,
     downloaded as each form writes "not given", given to the route as NaN, NaN; one of the two alone refused."""
-    for msg, int_mode in ((_legacy(0, M.MAV_CMD_NAV_TAKEOFF, math.nan, math.nan, 1.0), False),
-                          (_int(0, M.MAV_CMD_NAV_TAKEOFF, INT32_MAX, INT32_MAX, 1.0), True)):
-        it = parse_item(msg, int_mode)
-        assert (it.x, it.y) == NOT_GIVEN
-        back = item_message(it, (255, 190), False, False)
-        assert math.isnan(back.x) and math.isnan(back.y)
-        assert (item_message(it, (255, 190), False, True).x, item_message(it, (255, 190), False, True).y) == NOT_GIVEN
-        plan = plan_of((it,), HOME, "held")
-        assert math.isnan(plan.items[0].lat) and math.isnan(plan.items[0].lon)
-    for msg, int_mode, result in (
-            (_legacy(0, M.MAV_CMD_NAV_TAKEOFF, math.nan, HOME[1], 1.0), False, M.MAV_MISSION_INVALID_PARAM5_X),
-            (_int(0, M.MAV_CMD_NAV_TAKEOFF, int(HOME[0] * 1e7), INT32_MAX, 1.0), True,
-             M.MAV_MISSION_INVALID_PARAM6_Y)):
-        with pytest.raises(ItemRefused) as exc:
-            parse_item(msg, int_mode)
-        assert exc.value.result == result
+    _held_as_not_given(0, M.MAV_CMD_NAV_TAKEOFF, 1.0)
+    _refused((_legacy(0, M.MAV_CMD_NAV_TAKEOFF, math.nan, HOME[1], 1.0), False, M.MAV_MISSION_INVALID_PARAM5_X),
+             (_int(0, M.MAV_CMD_NAV_TAKEOFF, int(HOME[0] * 1e7), INT32_MAX, 1.0), True, M.MAV_MISSION_INVALID_PARAM6_Y))
 
 
 def test_an_uploaded_takeoff_with_no_position_is_flown_where_it_is(tmp_path: Path) -> None:
