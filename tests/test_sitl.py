@@ -210,6 +210,13 @@ def test_realtime_tracks_and_records_its_timing(short_runs):
     assert np.all(run.trace["state_age_s"][10:] > 0.0)  # the command in force answers an older state
 
 
+def _stall(pid: int, seconds: float) -> None:
+    """Stop a process ``seconds`` long (SIGSTOP, SIGCONT), as a host that takes its core back stops it."""
+    os.kill(pid, signal.SIGSTOP)
+    time.sleep(seconds)  # the stall itself, not a wait for something to happen
+    os.kill(pid, signal.SIGCONT)
+
+
 def test_a_real_time_run_the_machine_stalls_lists_each_stall_by_side_and_exits_1(tmp_path):
     """The vehicle (0.3 s: past the 0.25 s a paced lockstep re-bases at), the controller and the relay (a 2 ms
     link; 0.2 s each) stopped (SIGSTOP, SIGCONT) mid-flight, as a host that takes its cores back stops them:
@@ -220,15 +227,11 @@ def test_a_real_time_run_the_machine_stalls_lists_each_stall_by_side_and_exits_1
     (tmp_path / "m.toml").write_text('name = "stalls"\nduration_s = 4.5\n[trajectory]\nkind = "sine"\n' + HOLD)
     run = tmp_path / "run"
     with instance_slot() as n:
-        p = Bsst("sitl", str(tmp_path / "m.toml"), "--realtime", "--instance", str(n), "--out", str(run),
-                 "--no-plots", "--delay", "2", env=ENV)
+        p = _bsst_sitl(n, tmp_path / "m.toml", run, "--realtime", "--delay", "2")
         try:
             for rows, side, stop_s in ((250, "vehicle", 0.3), (525, "controller", 0.2), (800, "relay", 0.2)):
                 wait_for(lambda rows=rows: count_records(run / "controller.bin") > rows, 60, f"{rows} rows flown")
-                pid = child_pids(run)[side]
-                os.kill(pid, signal.SIGSTOP)
-                time.sleep(stop_s)  # the stall itself, not a wait for something to happen
-                os.kill(pid, signal.SIGCONT)
+                _stall(child_pids(run)[side], stop_s)
             out, err = p.communicate(timeout=60)
         finally:
             if p.poll() is None:
@@ -256,15 +259,11 @@ def test_a_controller_stalled_between_the_arm_and_its_first_target_is_named_with
     (tmp_path / "m.toml").write_text('name = "armstall"\nduration_s = 2.0\n[trajectory]\nkind = "sine"\n' + HOLD)
     run = tmp_path / "run"
     with instance_slot() as n:
-        p = Bsst("sitl", str(tmp_path / "m.toml"), "--realtime", "--instance", str(n), "--out", str(run),
-                 "--no-plots", "--delay", "200", env=ENV)
+        p = _bsst_sitl(n, tmp_path / "m.toml", run, "--realtime", "--delay", "200")
         try:
             log = run / "events.log"
             wait_for(lambda: "[by 200:" in (log.read_text() if log.is_file() else ""), 60, "the vehicle armed")
-            pid = child_pids(run)["controller"]
-            os.kill(pid, signal.SIGSTOP)
-            time.sleep(1.5)  # the stall itself, not a wait for something to happen
-            os.kill(pid, signal.SIGCONT)
+            _stall(child_pids(run)["controller"], 1.5)
             out, err = p.communicate(timeout=60)
         finally:
             if p.poll() is None:
