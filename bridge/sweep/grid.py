@@ -34,6 +34,7 @@ from missions import MISSION_RANGES, Mission
 from missions.fleet import FLEET_RANGES
 from missions.mission import DEFAULT_DISCRETIZATION, DISCRETIZATIONS, law_spec_from, law_spec_problem
 from params import ConfigError
+from plant.events import TimedEvent, at_first_step, timeline_from_tables
 from plant.profiles import NOISE_SCALE_RANGE
 from plant.wind import TURBULENCE, WIND_RANGES
 
@@ -245,12 +246,16 @@ class Cell:
                         for a in (*AXES, "seed"))
 
 
-def mission_value(mission: Mission, axis: str, with_profile: bool = True) -> Any:
-    """The mission's own value of an axis (link axes: ``[link.up]``, else ``[link]``, laid over its link profile's
-    as the flight lays them (``with_profile``), else none; the vehicle's: ``[estimator] kind`` and ``[sensors]
-    noise_scale``, else their defaults). (A sweep over loss on ``--link-profile lte`` wrote delay_ms 0, jitter_ms 0
-    and burst_len 0 in every row and report.md, of flights at 35 ms, sigma 6, bursts of 5, until the third wave's
-    forty-third session.)"""
+def mission_value(mission: Mission, axis: str, with_profile: bool = True, events: bool = True) -> Any:
+    """The mission's own value of an axis, as its flight flies it from the start (link axes: ``[link.up]``, else
+    ``[link]``, laid over its link profile's as the flight lays them (``with_profile``), else none; the vehicle's:
+    ``[estimator] kind`` and ``[sensors] noise_scale``, else their defaults). With ``events``, an ``[[events]]`` table
+    that sets the steady wind or hands the link over at the first control step (``t_s = 0``) gives the wind speed,
+    or the link axes (from its own table: a handover replaces the link whole), in place of ``[wind]`` and ``[link]``;
+    without (``bsst margin``'s "the mission already sets it"), the tables alone. (A sweep over loss on
+    ``--link-profile lte`` wrote delay_ms 0, jitter_ms 0 and burst_len 0 in every row and report.md, of flights at
+    35 ms, sigma 6, bursts of 5, until the third wave's forty-third session; a mission's ``[wind] speed_mps`` 5 under
+    a t = 0 wind event of 1 m/s, 5 in every row's wind_mps, of flights at 1, until the forty-fifth session's.)"""
     if axis == "controller":
         return mission.controller
     if axis == "rate_hz":
@@ -265,13 +270,14 @@ def mission_value(mission: Mission, axis: str, with_profile: bool = True) -> Any
     if axis == "noise":
         scale = mission.sensors.get("noise_scale", 1.0)
         return float(scale) if isinstance(scale, (int, float)) and not isinstance(scale, bool) else 1.0
-    if axis == "wind_mps":
-        speed = mission.wind.get("speed_mps", 0.0)
-        return float(speed) if isinstance(speed, (int, float)) and not isinstance(speed, bool) else 0.0
     if axis == "turbulence":
         level = mission.wind.get("turbulence", "none")
         return level if isinstance(level, str) else "none"  # a bad level: prepare() names it
-    link = mission.link
+    first = _first_step_event(mission, "wind" if axis == "wind_mps" else "link") if events else None
+    if axis == "wind_mps":
+        speed = first.get("speed_mps") if first is not None else mission.wind.get("speed_mps", 0.0)
+        return float(speed) if isinstance(speed, (int, float)) and not isinstance(speed, bool) else 0.0
+    link = dict(first.settings) if first is not None else mission.link  # (a handover's table: scalar keys only)
     profile = link.get("profile")
     if with_profile and isinstance(profile, str) and profile:
         try:
@@ -284,6 +290,18 @@ def mission_value(mission: Mission, axis: str, with_profile: bool = True) -> Any
         if isinstance(v, (int, float)) and not isinstance(v, bool):
             return float(v)
     return LINK_DEFAULTS[axis]
+
+
+def _first_step_event(mission: Mission, kind: str) -> TimedEvent | None:
+    """The mission's ``[[events]]`` table of ``kind`` (``wind``, ``link``) acting at its first control step: what it
+    sets is flown from the start in place of the mission's own; None (also for a bad timeline: prepare() names it)."""
+    if not mission.events:
+        return None
+    try:
+        timeline = timeline_from_tables(mission.events, mission.source, mission.duration_s)
+    except ConfigError:
+        return None
+    return at_first_step(timeline, mission.rate_hz, kind)
 
 
 def cells(mission: Mission, grid: Grid) -> list[Cell]:

@@ -277,14 +277,16 @@ def margin(mission: Mission | str | Path, over: str, until: Until | str, *, cont
     classes = Classes.of(classes)
     lo_range, top = RANGES[over]
     laws = list(controllers or (mission.controller,))
-    base = {a: float(mission_value(mission, a, with_profile=False) or 0.0) for a in LINK_AXES}  # (a profile's
-    # delay is searched over: the probe's value replaces it)
+    # the mission's own [link]: a profile's delay is searched over (the probe's value replaces it), a link event is
+    # refused as such below
+    base = {a: float(mission_value(mission, a, with_profile=False, events=False) or 0.0) for a in LINK_AXES}
     if over in LINK_AXES and base[over]:
         raise ConfigError(f"margin over {over}: the mission's [link] already sets {over} = {base[over]:g}; "
                           "search from a mission without it")
-    if over == "wind_mps" and mission_value(mission, over):
-        raise ConfigError(f"margin over wind_mps: the mission's [wind] already sets speed_mps = "
-                          f"{mission_value(mission, over):g}; search from a mission without it")
+    own_wind = mission_value(mission, "wind_mps", events=False)  # [wind]'s own: a wind event is named below
+    if over == "wind_mps" and own_wind:
+        raise ConfigError(f"margin over wind_mps: the mission's [wind] already sets speed_mps = {own_wind:g}; "
+                          "search from a mission without it")
     kind = "wind" if over == "wind_mps" else "link" if over in LINK_AXES else None
     why = swept_replaced_problem(mission, kind, "probe") if kind else None
     if why:  # every probe would fly the event's wind or link from its step: a margin of the event's, not the searched
