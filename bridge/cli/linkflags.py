@@ -7,7 +7,9 @@ Out: :func:`link_table_from_args`'s ``[link]`` override table, which goes to :fu
      an :class:`~bridge.core.overrides.Overrides` like every other override, with the flags that gave its traces as
      typed (:func:`link_flags_from_args`)
      (:func:`bridge.cli.options.overrides_from_args`); a combination no direction can fly is a ``UsageError``
-     naming the flags (exit 2); :func:`idle_link_flag`, a flag that would change nothing, as its refusal's line;
+     naming the flags (exit 2), a flag for both directions that both its direction's own override a typed
+     :class:`~params.ConfigError` naming them (:func:`shadowed_flag_refusal`); :func:`idle_link_flag`, a flag that
+     would change nothing, as its refusal's line;
      :func:`guard_flag_refusal`, a guard flag that clashes with the flight's other guard keys, as its line
 
 The ranges are the mission loader's (:data:`bridge.link.model.NUMBER_RANGES`), one per key.
@@ -132,7 +134,12 @@ def add_trace_options(g: Any) -> None:
 def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
     """The ``[link]`` overrides the flags of :func:`add_link_options` ask for ({} if none).
 
-    Flags for both directions write both ``up`` and ``down``; ``--up-*`` / ``--down-*`` win."""
+    Flags for both directions write both ``up`` and ``down``; ``--up-*`` / ``--down-*`` win. A flag for both given
+    with both of its direction's own (``--delay 40 --up-delay 10 --down-delay 30``) sets nothing: refused
+    (:func:`shadowed_flag_refusal`)."""
+    refused = shadowed_flag_refusal(args)
+    if refused is not None:
+        raise refused
     out: dict[str, Any] = {}
     keys = [key for _, key, *_ in LINK_FLAGS] + ["blackouts", *TRACE_KEYS]
     for d in ("up", "down"):
@@ -167,6 +174,37 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
         if v is not None:
             out[key] = v
     return out
+
+
+def _shown(flag: str, v: Any) -> str:
+    """A link flag as typed: ``--delay 40``, ``--blackout 1:0.5`` once per window, ``--link-trace none``, ``--link-trace
+    -loop true``."""
+    if isinstance(v, bool):
+        return f"{flag} {str(v).lower()}"
+    if isinstance(v, list):
+        return " ".join(f"{flag} {start:g}:{length:g}" for start, length in v)
+    if isinstance(v, str):
+        return f"{flag} {v or 'none'}"
+    return f"{flag} {v:g}"
+
+
+def shadowed_flag_refusal(args: argparse.Namespace) -> ConfigError | None:
+    """The refusal (typed, :meth:`ConfigError.at`: its ``source`` the flag as typed) of a link flag for both directions
+    (``--delay``, ``--loss``, ``--blackout``, ``--link-trace`` ...) given with both of its direction's own flags
+    (``--up-delay`` and ``--down-delay``), which win over it in their direction, so it sets nothing in either: taken
+    silently until the forty-fifth session (``--delay 40 --up-delay 10 --down-delay 30`` flew 10 and 30 ms). None."""
+    stems = [(stem, key) for stem, key, *_ in LINK_FLAGS] + [("blackout", "blackouts"), ("link-trace", "trace"),
+                                                             ("link-trace-loop", "trace_loop")]
+    for stem, key in stems:
+        both = getattr(args, f"link_{key}", None)
+        own = [(f"--{d}-{stem}", v) for d in ("up", "down")
+               if (v := getattr(args, f"link_{d}_{key}", None)) is not None]
+        if both is not None and len(own) == 2:
+            flag = _shown(f"--{stem}", both)
+            return ConfigError.at(flag, None, f"sets nothing: {_shown(*own[0])} and {_shown(*own[1])} set the two "
+                                  f"directions, and a direction's own flag wins over --{stem}; drop --{stem}, or one "
+                                  "of them", sep=": ")
+    return None
 
 
 def link_flags_from_args(args: argparse.Namespace) -> dict[str, str]:
