@@ -168,6 +168,17 @@ def _here(plan: PlanFile, item: Item) -> bool:
     return True
 
 
+def _off_the_ground(plan: PlanFile, item: Item, last: Stop, x: float, y: float, z: float) -> None:
+    """Refuse a leg from ``last`` to (x, y, z) (m) that moves along the ground: a vehicle standing there cannot fly
+    it (until the forty-fifth session it was planned, the vehicle stood still at its start, and the run said
+    ``completed``, exit 0, its 3-D RMS error the leg's length)."""
+    d = math.hypot(x - last.x, y - last.y)
+    if max(last.z, z) < SAME_POINT_M and d >= SAME_POINT_M:
+        raise plan.refuse(item, f"flies {d:.2f} m along the ground (from x={last.x:.2f} y={last.y:.2f} m to "
+                                f"x={x:.2f} y={y:.2f} m, both at its level): a vehicle on the ground cannot; climb "
+                                "first (NAV_TAKEOFF, or a waypoint above the ground)")
+
+
 def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[Stop], bool]:
     """The plan's points in order (the start first), and whether it lands."""
     home = Home(*plan.home)
@@ -175,8 +186,9 @@ def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[St
     pts = [Stop(0.0, 0.0, 0.0, 0.0, True, 0.0, xy, up, dn, ())]
     landed_by: Item | None = None
 
-    def add(x: float, y: float, z: float, psi: float, stop: bool, hold: float, label: str) -> None:
-        last = pts[-1]
+    def add(x: float, y: float, z: float, psi: float, stop: bool, hold: float, item: Item) -> None:
+        last, label = pts[-1], item.label
+        _off_the_ground(plan, item, last, x, y, z)
         if math.dist((x, y, z), (last.x, last.y, last.z)) < SAME_POINT_M:  # the same point: one stop
             pts[-1] = replace(last, psi=last.psi if math.isnan(psi) else psi, stop=last.stop or stop,
                               hold_s=last.hold_s + hold,
@@ -193,8 +205,8 @@ def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[St
             continue
         here = pts[-1]
         if cmd == NAV_RETURN_TO_LAUNCH:
-            add(0.0, 0.0, here.z, math.nan, True, 0.0, item.label)
-            add(0.0, 0.0, 0.0, math.nan, True, 0.0, item.label)
+            add(0.0, 0.0, here.z, math.nan, True, 0.0, item)
+            add(0.0, 0.0, 0.0, math.nan, True, 0.0, item)
             landed_by = item
             continue
         if cmd in (NAV_LAND, NAV_TAKEOFF) and item.lat == 0.0 and item.lon == 0.0 or _here(plan, item):
@@ -211,17 +223,22 @@ def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[St
         if cmd == NAV_TAKEOFF:
             if z <= here.z + SAME_POINT_M:
                 raise plan.refuse(item, f"takeoff altitude {z:.2f} m is not above the vehicle ({here.z:.2f} m)")
-            add(here.x, here.y, z, psi, True, 0.0, item.label)  # straight up, then to its position
-            add(x, y, z, psi, True, 0.0, item.label)
+            add(here.x, here.y, z, psi, True, 0.0, item)  # straight up, then to its position
+            add(x, y, z, psi, True, 0.0, item)
         elif cmd == NAV_LAND:
-            add(x, y, here.z, psi, True, 0.0, item.label)  # over the landing point, then down
-            add(x, y, 0.0, psi, True, 0.0, item.label)
+            if len(pts) == 1:  # on the ground at its start: PX4's feasibility check refuses it too
+                raise plan.refuse(item, "a landing as the first item that flies, the vehicle still on the ground "
+                                        "(PX4 rejects a mission whose item 0 is one: \"Mission rejected: starts "
+                                        "with landing\"); take off first (NAV_TAKEOFF)")
+            add(x, y, here.z, psi, True, 0.0, item)  # over the landing point, then down
+            add(x, y, 0.0, psi, True, 0.0, item)
             landed_by = item
         else:
             hold = _hold(plan, item)
-            add(x, y, z, psi, cmd == NAV_LOITER_TIME or hold > 0.0, hold, item.label)
+            add(x, y, z, psi, cmd == NAV_LOITER_TIME or hold > 0.0, hold, item)
     if len(pts) < 2:
-        raise ConfigError(f"{plan.source}: mission.items: no position to fly to (no NAV_ item)")
+        raise ConfigError(f"{plan.source}: mission.items: no position to fly to (no item takes the vehicle up "
+                          "from where it stands: NAV_TAKEOFF, NAV_WAYPOINT, NAV_LOITER_TIME)")
     last = pts[-1]
     pts[-1] = replace(last, stop=True)
     return pts, landed_by is not None

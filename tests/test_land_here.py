@@ -28,6 +28,8 @@ from bridge.cli import main
 from bridge.mavlink.missionitems import INT32_MAX, NOT_GIVEN, ItemRefused, item_message, parse_item, plan_of
 from bridge.session import instance_slot
 from missions.geodetic import Home
+from missions.route import Limits, stops_of
+from params import ConfigError
 from tests.gcskit import command_ack, gcs_link, vehicle_of
 from tests.sitlkit import Proc, clean_exit
 
@@ -254,3 +256,46 @@ def test_an_uploaded_takeoff_with_no_position_is_flown_where_it_is(tmp_path: Pat
     _, out = _upload_and_fly(tmp_path, items)
     _took_off_over_the_home(out)
     _landed_at(out, Home(*HOME).paper(round((HOME[0] + NORTH) * 1e7) / 1e7, round(HOME[1] * 1e7) / 1e7, HOME[2])[:2])
+
+
+@pytest.mark.parametrize("at", [(None, None), (HOME[0] + NORTH, HOME[1])], ids=["here", "north"])
+def test_a_mission_that_starts_with_a_landing_is_refused_as_px4_refuses_it(capsys: Any, tmp_path: Path,
+                                                                           at: tuple[Any, Any]) -> None:
+    """A plan whose first item that flies is a NAV_LAND, the vehicle on the ground: refused naming the item and
+    PX4's words (its FeasibilityChecker: "Mission rejected: starts with landing"), exit 2, nothing written. Before,
+    a land here was refused as "no position to fly to (no NAV_ item)", and a land 2 m north was planned as a slide
+    along the ground: the vehicle never moved, and the run said completed, exit 0, its 3-D RMS error 2 m. The same
+    refusal stops an upload's MISSION_START (plan_of: the vehicle's start check)."""
+    plan = _plan(at)
+    plan["mission"]["items"] = plan["mission"]["items"][2:]
+    path = tmp_path / "land.plan"
+    path.write_text(json.dumps(plan))
+    out = tmp_path / "run"
+    assert main(["sim", str(path), "--no-plots", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"bsst: {path}: mission.items[0] (NAV_LAND (21)): a landing as the first item that flies, the "
+                   "vehicle still on the ground (PX4 rejects a mission whose item 0 is one: \"Mission rejected: "
+                   "starts with landing\"); take off first (NAV_TAKEOFF)"], err
+    assert not out.exists()
+    held = plan_of((parse_item(_int(0, M.MAV_CMD_NAV_LAND, INT32_MAX, INT32_MAX, 0.0), True),), HOME, "held")
+    with pytest.raises(ConfigError, match="starts with landing"):
+        stops_of(held, Limits(), 100.0)
+
+
+def test_a_leg_along_the_ground_is_refused_naming_it(capsys: Any, tmp_path: Path) -> None:
+    """A first waypoint at 0 m, 2 m north of the home: the vehicle on the ground cannot fly there. Refused naming
+    the item and the leg, exit 2. Before, it was planned as a slide along the ground at 0 m: the vehicle stood at
+    the home throughout and the run said completed, exit 0, every policy holding, its 3-D RMS error 2 m."""
+    plan = _plan((None, None))
+    plan["mission"]["items"] = plan["mission"]["items"][1:2]
+    plan["mission"]["items"][0]["params"][6] = 0.0
+    path = tmp_path / "slide.plan"
+    path.write_text(json.dumps(plan))
+    out = tmp_path / "run"
+    assert main(["sim", str(path), "--no-plots", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"bsst: {path}: mission.items[0] (NAV_WAYPOINT (16)): flies 2.00 m "
+                                               "along the ground (from x=0.00 y=0.00 m to x=2.00 y="), err
+    assert err[0].endswith("a vehicle on the ground cannot; climb first (NAV_TAKEOFF, or a waypoint above the "
+                           "ground)"), err
+    assert not out.exists()
