@@ -13,8 +13,10 @@ its point, if it gives one other than 0, 0 or NaN, NaN);
 NAV_WAYPOINT passes through (stops when it holds: param1 s); NAV_LOITER_TIME stops and holds param1 s;
 NAV_LAND flies over its point (here if its latitude and longitude are 0, or both NaN), stops, and descends to the
 ground; NAV_RETURN_TO_LAUNCH flies over the home at its altitude, stops and lands; nothing may follow a
-landing. DO_CHANGE_SPEED (param1 0/1 horizontal, 2 up, 3 down; param2 m/s, -1 or -2 no change) changes the
-limit of the legs after it. Yaw (param4 deg, clockwise from north; NaN or none) is as given, else
+landing. As PX4's feasibility check, a takeoff after an item that flies and a landing as the first item that
+flies are refused, and so is any leg along the ground (both ends at 0 m). DO_CHANGE_SPEED (param1 0/1
+horizontal, 2 up, 3 down; param2 m/s, -1 or -2 no change) changes the limit of the legs after it.
+Yaw (param4 deg, clockwise from north; NaN or none) is as given, else
 along the path: the heading of the leg (the bisector of the two at a pass-through corner).
 
 Guide points on every horizontal leg, near its ends, keep the curve close to the legs (:func:`with_guides`).
@@ -221,6 +223,10 @@ def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[St
             x, y, z = _local(plan, home, item, envelope_m)
         psi = _yaw(plan, item)
         if cmd == NAV_TAKEOFF:
+            if len(pts) > 1:  # PX4's FeasibilityChecker::checkTakeoff
+                raise plan.refuse(item, f"a takeoff after {pts[-1].items[-1]}, an item that flies (PX4 rejects it: "
+                                        "\"Mission rejected: takeoff not first waypoint item\"); make it the first "
+                                        "item that flies")
             if z <= here.z + SAME_POINT_M:
                 raise plan.refuse(item, f"takeoff altitude {z:.2f} m is not above the vehicle ({here.z:.2f} m)")
             add(here.x, here.y, z, psi, True, 0.0, item)  # straight up, then to its position

@@ -299,3 +299,22 @@ def test_a_leg_along_the_ground_is_refused_naming_it(capsys: Any, tmp_path: Path
     assert err[0].endswith("a vehicle on the ground cannot; climb first (NAV_TAKEOFF, or a waypoint above the "
                            "ground)"), err
     assert not out.exists()
+
+
+def test_a_takeoff_after_an_item_that_flies_is_refused_as_px4_refuses_it(capsys: Any, tmp_path: Path) -> None:
+    """A takeoff here, the waypoint, then a second takeoff here to 3 m: PX4's FeasibilityChecker::checkTakeoff rejects
+    it ("Mission rejected: takeoff not first waypoint item"). Refused naming the item and the one before it, exit 2.
+    Before, it flew (a climb from 1 m to 3 m over the waypoint) and said completed, exit 0."""
+    plan = _plan((None, None), takeoff=(None, None))
+    again = json.loads(json.dumps(plan["mission"]["items"][0]))
+    again["params"][6] = 3.0
+    plan["mission"]["items"].insert(2, again)
+    path = tmp_path / "again.plan"
+    path.write_text(json.dumps(plan))
+    out = tmp_path / "run"
+    assert main(["sim", str(path), "--no-plots", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"bsst: {path}: mission.items[2] (NAV_TAKEOFF (22)): a takeoff after mission.items[1], an item "
+                   "that flies (PX4 rejects it: \"Mission rejected: takeoff not first waypoint item\"); make it the "
+                   "first item that flies"], err
+    assert not out.exists()
