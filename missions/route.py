@@ -10,7 +10,8 @@ Out: a :class:`Route`: the knots (t s; x, y, z m and psi rad in the paper frame 
 
 The vehicle starts at rest on the ground at the home. NAV_TAKEOFF climbs over where it is and stops (then flies to
 its point, if it gives one other than 0, 0 or NaN, NaN);
-NAV_WAYPOINT passes through (stops when it holds: param1 s); NAV_LOITER_TIME stops and holds param1 s;
+NAV_WAYPOINT passes through (stops when it holds: param1 s); NAV_LOITER_TIME stops and holds param1 s; the
+first of either from the ground is climbed to straight up first, to at least MIS_TAKEOFF_ALT (PX4's default);
 NAV_LAND flies over its point (here if its latitude and longitude are 0, or both NaN), stops, and descends to the
 ground; NAV_RETURN_TO_LAUNCH flies over the home at its altitude, stops and lands; nothing may follow a
 landing. As PX4's feasibility check, a takeoff after an item that flies and a landing as the first item that
@@ -53,6 +54,7 @@ from missions.planfiles import (
 from params import ConfigError
 
 SAME_POINT_M = 0.01  # m: closer than this, two points are one (no leg between them)
+MIS_TAKEOFF_ALT_M = 2.5  # m: PX4's default; a first waypoint from the ground is climbed to straight up to at least this
 MAX_SPEED_M_S = 12.0  # PX4's MPC_XY_VEL_MAX default: a faster cruise or DO_CHANGE_SPEED is refused
 SAMPLING_MARGIN = 1.002  # the peaks fall between samples: 48 a leg see them to about 1e-5; this keeps them under
 SAMPLES_PER_LEG = 48  # samples of each leg's speed, acceleration and yaw rate against the limits
@@ -241,6 +243,8 @@ def stops_of(plan: PlanFile, limits: Limits, envelope_m: float) -> tuple[list[St
             landed_by = item
         else:
             hold = _hold(plan, item)
+            if len(pts) == 1 and z >= SAME_POINT_M:  # from the ground: PX4's Mission::do_need_vertical_takeoff
+                add(here.x, here.y, max(z, MIS_TAKEOFF_ALT_M), psi, True, 0.0, item)
             add(x, y, z, psi, cmd == NAV_LOITER_TIME or hold > 0.0, hold, item)
     if len(pts) < 2:
         raise ConfigError(f"{plan.source}: mission.items: no position to fly to (no item takes the vehicle up "

@@ -318,3 +318,21 @@ def test_a_takeoff_after_an_item_that_flies_is_refused_as_px4_refuses_it(capsys:
                    "that flies (PX4 rejects it: \"Mission rejected: takeoff not first waypoint item\"); make it the "
                    "first item that flies"], err
     assert not out.exists()
+
+
+def test_a_first_waypoint_from_the_ground_is_climbed_to_straight_up_as_px4_does(capsys: Any, tmp_path: Path) -> None:
+    """No NAV_TAKEOFF: the waypoint 2 m north at 1 m, then a land here. PX4's mission (Mission::do_need_vertical_
+    takeoff) climbs straight up over where the vehicle stands to the higher of the waypoint's altitude and
+    MIS_TAKEOFF_ALT (2.5 m), then flies to it. Before, the route climbed along the straight line from the home to the
+    waypoint: 0.5 m up, the vehicle was already 0.58 m north, and it never rose above 1 m."""
+    plan = _plan((None, None))
+    plan["mission"]["items"] = plan["mission"]["items"][1:]
+    path = tmp_path / "nota.plan"
+    path.write_text(json.dumps(plan))
+    out = tmp_path / "run"
+    assert main(["sim", str(path), "--no-plots", "--out", str(out)]) == 0, capsys.readouterr().err
+    _took_off_over_the_home(out)
+    lines = (out / "trace.csv").read_text().splitlines()
+    z = lines[0].split(",").index("z")
+    assert max(float(line.split(",")[z]) for line in lines[1:]) > 2.49
+    _landed_at_the_waypoint(out)
