@@ -395,3 +395,15 @@ def test_a_law_that_fails_every_flight_is_not_reported_as_a_boundary(tmp_path: P
     assert "fails at every value flown" not in r.stdout
     assert "none (the law failed, not the criterion: law_failed at 16; " in r.stdout and says in r.stdout, r.stdout
     assert f"{laws}:Raises could not be flown at delay_ms = 16 (seed 0, law_failed): " in r.stderr, r.stderr
+
+
+def test_a_probes_unsearched_columns_are_the_wind_and_link_it_flew(tmp_path: Path, here) -> None:
+    """Each cell of margin.json says the wind the probe flew: the mission's ``[wind] speed_mps = 5`` (the cells
+    held the searched axis alone, the probes' rows 0 m/s, until the forty-fifth session; the flight flew 5)."""
+    mission = tmp_path / "windy.toml"
+    mission.write_text(dump_toml(SHORT.with_overrides(wind={"speed_mps": 5.0}).to_dict()))
+    r = here("margin", str(mission), "--over", "delay_ms", "--until", "rms=0.05", "--resolution", "16",
+             "--check-below", "0", "--out", str(tmp_path / "m"))
+    assert r.returncode == 0, r.stderr
+    cells = json.loads((tmp_path / "m" / "margin.json").read_text())["controllers"][0]["cells"]
+    assert cells and all(c["wind_mps"] == 5.0 for c in cells), cells

@@ -180,7 +180,9 @@ class Search:
              phase: str) -> bool:
         """Record this law's cells of ``value`` among ``rows`` (``phase``: bisection | below); whether it failed."""
         mine = [r for r in rows if r["controller"] == self.controller and r[over] == value]
-        cells = [{over: value, "seed": r["seed"], "rms": r["rms"], "outcome": r["outcome"],
+        # (each cell says the wind, link and noise it flew, not the searched axis alone: forty-fifth session)
+        cells = [{over: value, **{a: r[a] for a in OVER if a != over}, "seed": r["seed"], "rms": r["rms"],
+                  "outcome": r["outcome"],
                   "class": classify(r, classes), "failed": until.failed(r, classes), "phase": phase,
                   "error": r.get("error") or "", "policies": r.get("policies") or "",
                   "jitter_capped": r.get("jitter_capped") or ""} for r in mine]
@@ -305,8 +307,11 @@ def margin(mission: Mission | str | Path, over: str, until: Until | str, *, cont
     if why:  # every probe would fly the same flight: a margin of the whole range, measured of nothing
         raise ConfigError(f"margin over {over}: changes nothing: {why}; give the mission a {NEEDS[over][0]} (or "
                           f"--loss PCT)")
+    # every column but the searched one as the probe flies it: the link laid over its profile and a t = 0 event's
+    # wind or link (as a sweep's unswept columns; 0 m/s and no profile in every cell until the forty-fifth session)
+    base = {a: float(mission_value(mission, a) or 0.0) for a in LINK_AXES}
     vehicle = {"estimator": flight.estimator, "noise": mission_value(mission, "noise"),
-               "turbulence": mission_value(mission, "turbulence")}
+               "turbulence": mission_value(mission, "turbulence"), "wind_mps": mission_value(mission, "wind_mps")}
     seed_list = [mission.seed + i for i in range(seeds)]
     for c in laws:  # each law's file, module and class before any cell flies (as a sweep's validate does)
         try:
@@ -453,9 +458,10 @@ def probe(mission: Mission, law: str, over: str, value: float, seed: int, link: 
     own = {"seed": seed, "discretization": mission.discretization}
     if over == "noise":
         return Cell(law, float(mission.rate_hz), **link, **own, estimator=vehicle["estimator"], noise=value,
-                    sensing=("noise",), turbulence=vehicle["turbulence"])
+                    sensing=("noise",), turbulence=vehicle["turbulence"], wind_mps=vehicle["wind_mps"])
     if over == "wind_mps":
-        return Cell(law, float(mission.rate_hz), **link, **own, **vehicle, wind_mps=value, weather=("wind_mps",))
+        return Cell(law, float(mission.rate_hz), **link, **own, **{**vehicle, "wind_mps": value},
+                    weather=("wind_mps",))
     return Cell(law, float(mission.rate_hz), **{**link, over: value}, **own, link=(over,), **vehicle)
 
 
