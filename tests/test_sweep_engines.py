@@ -350,7 +350,7 @@ def test_a_margin_probes_the_missions_own_scheme() -> None:
     """``bsst margin --discretization implicit``: every probe cell flies the scheme laid over the mission."""
     m = SHORT.with_overrides(discretization="implicit")
     base = {a: float(mission_value(m, a)) for a in LINK_AXES}
-    vehicle = {"estimator": "truth", "noise": 1.0, "turbulence": "none"}
+    vehicle = {"estimator": "truth", "noise": 1.0, "turbulence": "none", "wind_mps": 0.0}
     for over in ("delay_ms", "noise", "wind_mps"):
         assert probe(m, "bsst", over, 1.0, 0, base, vehicle).discretization == "implicit"
 
