@@ -224,19 +224,25 @@ def _controller_missing_the_failsafe(tmp: Path, answer: str, at_step: int = 10
     stats = [r.values for r in reports if isinstance(r, Stats)]
     assert len(done) == 1 and len(stats) == 1, reports[-5:]
     said = [r.t for r in reports if isinstance(r, Event) and r.kind == "failsafe"]
-    return done[0], requests.asked, stats[0]["events"], said
+    return done[0], requests.asked, {**stats[0]["events"], "stalls_waiting": stats[0]["stalls_waiting"]}, said
 
 
 def test_the_controller_asks_for_a_missed_failsafe_event_and_ends_failsafe(tmp_path: Path) -> None:
     """... and says so at the mission's end (1.4 s), stamped when the failsafe took over: the EVENT's time (step 10,
     200 ms on the vehicle's clock) on the flight's, whose 0 comes after the PHASE_STATES (0.1 s; later when a loaded
     machine holds the controller back, which moves the stamp earlier: a loaded suite saw 0.06 s). Until the third
-    wave's thirty-seventh session it was stamped at the mission's end, t=1.400."""
+    wave's thirty-seventh session it was stamped at the mission's end, t=1.400. Before the flight's 0 (t < 0) only when
+    the machine stalled the controller's phase-lock (listed in stalls_waiting), which then locked on later states."""
     done, asked, counts, said = _controller_missing_the_failsafe(tmp_path, "event")
     assert (done.outcome, done.reason) == ("failsafe", "the vehicle's failsafe took over (its EVENT FAILSAFE)")
     assert asked and set(asked) == {(0, 0)}, asked  # the one missed, asked for until it came
     assert counts["recovered"] == 1 and counts["lost"] == 0, counts
-    assert len(said) == 1 and 0.0 <= said[0] <= (10 - PHASE_STATES + 1) / RATE + 1e-9, said
+    # a loaded machine that stalls the controller's phase-lock has it lock afresh on later states (forty-fifth
+    # session): its first tick, the flight's 0, may then come after step 10, and the EVENT is stamped before it
+    # (t < 0; once -0.02 s in a CI-equivalent run at load 5): only with such a stall listed
+    waited = counts["stalls_waiting"]["count"]
+    assert len(said) == 1 and said[0] <= (10 - PHASE_STATES + 1) / RATE + 1e-9, said
+    assert said[0] >= 0.0 or waited > 0, (said, counts)
 
 
 @pytest.mark.parametrize("answer", ["error", "silent"])
