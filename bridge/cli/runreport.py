@@ -16,7 +16,7 @@ import sys
 from typing import Any
 
 from bridge.cli.flags import EXIT_FAILED, EXIT_OK
-from bridge.record.asked import ended_text, not_as_asked, waited_text
+from bridge.record.asked import ended_text, not_as_asked, stalls_text, waited_text
 
 EVENTS_SHOWN = 16  # events a run's printed summary lists (all of summary.json's beyond: its first 6 and last 10)
 SHOWN_PAIRS = 12  # pairs a fleet's printed summary lists, its closest (summary.json has every pair)
@@ -152,7 +152,6 @@ def print_summary(s: dict[str, Any], path: Any, stream: Any = None) -> None:
     """The one-screen summary printed after a run."""
     from bridge.record.ending import not_taken_text  # lazy: numpy
     from bridge.record.metrics import air_text  # lazy: numpy (loaded by the run this sums up)
-    from bridge.record.summary import stalls_text  # lazy: numpy
 
     out = stream or sys.stdout
     w = out.write

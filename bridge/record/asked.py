@@ -6,8 +6,8 @@ In:  a run's ``summary.json`` as a dict (one vehicle's), or the blocks of it a p
      (:mod:`bridge.record.ending`), ``timing.stalls`` (t s, ms)
 Out: :func:`ended_text`: why a flight ended before its mission did (its outcome, who ended it and how: ``failsafe:
      ended by vehicle: ...``), :func:`waited_text` the machine's stalls of its controller before the mission's first
-     state, said with it; :func:`not_as_asked`: one line each, ``not flown as asked: ...`` (or ``not a lockstep
-     run: ...``); any one of them makes the exit status 1
+     state, said with it (:func:`waiting_stalls_text`, the words); :func:`not_as_asked`: one line each, ``not flown
+     as asked: ...`` (or ``not a lockstep run: ...``); any one of them makes the exit status 1
 
 Split out of :mod:`bridge.cli.runreport` (which prints a run's summary) so that ``bsst controller``, below the CLI,
 says it in the same words.
@@ -36,7 +36,6 @@ def not_as_asked(s: dict[str, Any]) -> list[str]:
     from bridge.record.ending import not_taken_text  # lazy: numpy
     from bridge.record.interventions import intervention_text, unconfirmed_text  # lazy: numpy
     from bridge.record.policies import stalls_of  # lazy: numpy
-    from bridge.record.summary import stalls_text  # lazy: numpy
 
     lock = s.get("lockstep") or {"held": True}
     said = ([f"not a lockstep run: the vehicle left lockstep at t={lock['left_at_s']:.3f} s ({lock['why']})"]
@@ -56,6 +55,19 @@ def waited_text(s: dict[str, Any]) -> str | None:
     waited = (s.get("timing") or {}).get("stalls_waiting") or {}
     if s.get("outcome") in (None, "completed") or not waited.get("count"):
         return None
-    from bridge.record.summary import waiting_stalls_text  # lazy: numpy
-
     return waiting_stalls_text(waited)
+
+
+def stalls_text(stalls: dict[str, Any]) -> str:
+    """The note of a real-time run the machine stalled (its events and printed summary)."""
+    first = ", ".join(f"{s['side']} {s['ms']:g} ms at t={s['t']:.3f} s" for s in stalls["at"][:3])
+    more = f" and {stalls['count'] - 3} more" if stalls["count"] > 3 else ""
+    return (f"not flown as asked: the machine stalled the real-time loop {stalls['count']} time(s), worst "
+            f"{stalls['worst_ms']:g} ms ({first}{more}): outages no link model asked for")
+
+
+def waiting_stalls_text(stalls: dict[str, Any]) -> str:
+    """The note of a flight that failed after the machine stalled its controller before the mission's first state
+    (``timing.stalls_waiting``): no target came meanwhile, the vehicle's failsafe counting (docs/sitl.md)."""
+    return (f"the machine stalled the controller {stalls['count']} time(s) before the mission's first state (after "
+            f"the vehicle's arm), worst {stalls['worst_ms']:g} ms: no target meanwhile")

@@ -29,6 +29,7 @@ import numpy as np
 
 from bridge.core.clock import STALL_S
 from bridge.core.flight import Flight
+from bridge.record.asked import stalls_text, waiting_stalls_text
 from bridge.record.columns import TRACE_COLUMNS
 from bridge.record.endedby import arming_denied_end, ended_by_command, ended_by_outcome, failsafe_not_resumed
 from bridge.record.ending import end_not_taken, not_taken_text
@@ -255,21 +256,6 @@ def stalls_block(vehicle: Mapping[str, Any], controller: Mapping[str, Any], k0: 
                 worst = max(worst, ms)
     return {"threshold_ms": 1e3 * STALL_S, "count": count + len(at), "worst_ms": worst,
             "at": sorted(at, key=lambda s: s["t"])}
-
-
-def waiting_stalls_text(stalls: Mapping[str, Any]) -> str:
-    """The note of a flight that failed after the machine stalled its controller before the mission's first state
-    (``timing.stalls_waiting``): no target came meanwhile, the vehicle's failsafe counting (docs/sitl.md)."""
-    return (f"the machine stalled the controller {stalls['count']} time(s) before the mission's first state (after "
-            f"the vehicle's arm), worst {stalls['worst_ms']:g} ms: no target meanwhile")
-
-
-def stalls_text(stalls: Mapping[str, Any]) -> str:
-    """The note of a real-time run the machine stalled (its events and printed summary)."""
-    first = ", ".join(f"{s['side']} {s['ms']:g} ms at t={s['t']:.3f} s" for s in stalls["at"][:3])
-    more = f" and {stalls['count'] - 3} more" if stalls["count"] > 3 else ""
-    return (f"not flown as asked: the machine stalled the real-time loop {stalls['count']} time(s), worst "
-            f"{stalls['worst_ms']:g} ms ({first}{more}): outages no link model asked for")
 
 
 def notes_time(joined: Joined, events: Sequence[RunEvent], rate_hz: float, reported: Sequence[float] = ()) -> float:

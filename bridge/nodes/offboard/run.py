@@ -21,7 +21,7 @@ from bridge.nodes.offboard.config import OffboardConfig
 from bridge.nodes.offboard.flight import Offboard
 from bridge.nodes.process import on_stop_signals, report_printer
 from bridge.nodes.report import Done, Stats, StatusText
-from bridge.record.asked import not_as_asked
+from bridge.record.asked import not_as_asked, waiting_stalls_text
 from bridge.record.runlog import side_dir
 
 WARNED = 3  # the vehicle's first distinct warnings a failed end repeats on stderr
@@ -79,8 +79,6 @@ def run_controller(flight: Flight, cfg: OffboardConfig, out: str | Path | None =
                              f"nothing left to fly, so the controller ended there (not flown as asked)\n")
         sys.stderr.writelines(f"bsst controller: the vehicle warned: {text}\n" for text in warned)
         if node.stalls_waiting.count:  # not the mission's, but what may have ended it (the vehicle's failsafe)
-            from bridge.record.summary import waiting_stalls_text  # lazy: the session's words, only for this
-
             sys.stderr.write(f"bsst controller: {waiting_stalls_text(node.stalls_waiting.report())}\n")
     elif left:
         sys.stderr.write(f"bsst controller: completed, but not in lockstep: said by {node.left_lockstep}\n")
