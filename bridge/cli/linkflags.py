@@ -176,6 +176,13 @@ def link_table_from_args(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
+def _stems() -> list[tuple[str, str]]:
+    """Each link flag for both directions with its table key (``("delay", "delay_ms")``, ``("blackout",
+    "blackouts")``, ...): ``--STEM`` for both, ``--up-STEM`` and ``--down-STEM`` for one."""
+    return [(stem, key) for stem, key, *_ in LINK_FLAGS] + [("blackout", "blackouts"), ("link-trace", "trace"),
+                                                            ("link-trace-loop", "trace_loop")]
+
+
 def _shown(flag: str, v: Any) -> str:
     """A link flag as typed: ``--delay 40``, ``--blackout 1:0.5`` once per window, ``--link-trace none``, ``--link-trace
     -loop true``."""
@@ -193,9 +200,7 @@ def shadowed_flag_refusal(args: argparse.Namespace) -> ConfigError | None:
     (``--delay``, ``--loss``, ``--blackout``, ``--link-trace`` ...) given with both of its direction's own flags
     (``--up-delay`` and ``--down-delay``), which win over it in their direction, so it sets nothing in either: taken
     silently until the forty-fifth session (``--delay 40 --up-delay 10 --down-delay 30`` flew 10 and 30 ms). None."""
-    stems = [(stem, key) for stem, key, *_ in LINK_FLAGS] + [("blackout", "blackouts"), ("link-trace", "trace"),
-                                                             ("link-trace-loop", "trace_loop")]
-    for stem, key in stems:
+    for stem, key in _stems():
         both = getattr(args, f"link_{key}", None)
         own = [(f"--{d}-{stem}", v) for d in ("up", "down")
                if (v := getattr(args, f"link_{d}_{key}", None)) is not None]
@@ -214,10 +219,8 @@ def link_flags_from_args(args: argparse.Namespace) -> dict[str, str]:
     F``, ``--delay 40 --up-delay 10`` as ``up.delay_ms = 10, down.delay_ms = 40``, and a refusal names the flags the
     user gave (:attr:`bridge.core.overrides.Overrides.link_flags`); {} if none."""
     out = {"profile": "--link-profile"} if getattr(args, "link_profile", None) is not None else {}
-    stems = [(key, stem) for stem, key, *_ in LINK_FLAGS] + [("blackouts", "blackout"), ("trace", "link-trace"),
-                                                             ("trace_loop", "link-trace-loop")]
     for d in ("up", "down"):
-        for key, stem in stems:
+        for stem, key in _stems():
             given = [f for dest, f in ((f"link_{d}_{key}", f"--{d}-{stem}"), (f"link_{key}", f"--{stem}"))
                      if getattr(args, dest, None) is not None]
             if given:  # (the direction's own flag wins, as in the table)
